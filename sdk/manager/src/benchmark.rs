@@ -1,0 +1,149 @@
+//! A benchmark: every technique on every scene at every budget.
+//!
+//! The renderer of a scene starts once and serves every run on that scene
+//! (it is restarted only after a run left it broken or mid-request); the
+//! technique starts once per (scene, budget), as in the original FBKSD.
+
+use crate::record::{RunRecord, RunStatus};
+use crate::results::{path_safe_name, write_exr, write_json_atomically, ResultsDir};
+use crate::scene::{Limits, SceneRunner, TechniqueLaunch};
+use std::io;
+use std::path::PathBuf;
+
+/// A technique to run: a name and a command.
+#[derive(Debug, Clone)]
+pub struct TechniqueSpec {
+    /// Name used in results (a safe path component is derived from it).
+    pub name: String,
+    /// The command (program and arguments).
+    pub argv: Vec<String>,
+}
+
+/// A scene to render: a name and the renderer command that loads it.
+#[derive(Debug, Clone)]
+pub struct SceneSpec {
+    /// Name used in results.
+    pub name: String,
+    /// The renderer command, scene file included (normally last).
+    pub renderer_argv: Vec<String>,
+}
+
+/// What the benchmark reports while it works.
+#[derive(Debug)]
+pub enum Progress<'a> {
+    /// A run starts.
+    RunStarted {
+        /// Scene name.
+        scene: &'a str,
+        /// Technique name.
+        technique: &'a str,
+        /// Budget.
+        spp: u64,
+    },
+    /// Samples flow (at most a few times per second).
+    Samples {
+        /// Delivered so far.
+        delivered: u64,
+        /// Budget.
+        budget: u64,
+    },
+    /// A run ended.
+    RunFinished(&'a RunRecord),
+}
+
+/// Every technique × scene × budget.
+#[derive(Debug, Clone)]
+pub struct Benchmark {
+    /// Techniques.
+    pub techniques: Vec<TechniqueSpec>,
+    /// Scenes.
+    pub scenes: Vec<SceneSpec>,
+    /// Budgets in samples per pixel.
+    pub spps: Vec<u64>,
+    /// Where results go.
+    pub results: PathBuf,
+    /// Limits of every run.
+    pub limits: Limits,
+}
+
+impl Benchmark {
+    /// Runs everything, writing results as each run ends.
+    pub fn run(&self, mut progress: impl FnMut(Progress<'_>) + Send) -> io::Result<Vec<RunRecord>> {
+        let results = ResultsDir::create(&self.results)?;
+        let mut records = Vec::new();
+        for scene in &self.scenes {
+            let scene_name = path_safe_name(&scene.name);
+            let renderer_log = results.renderer_log(&scene_name)?;
+            let mut runner = SceneRunner::new(
+                scene.renderer_argv.clone(),
+                Some(renderer_log),
+                self.limits.clone(),
+            )?;
+            for technique in &self.techniques {
+                let technique_name = path_safe_name(&technique.name);
+                let dir = results.run_dir(&technique_name, &scene_name)?;
+                for &spp in &self.spps {
+                    progress(Progress::RunStarted {
+                        scene: &scene_name,
+                        technique: &technique_name,
+                        spp,
+                    });
+                    let stem = format!("{spp}_0");
+                    let technique_log = dir.join(format!("{stem}_technique.log"));
+                    let _ = std::fs::remove_file(&technique_log);
+                    let date =
+                        humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+                    let outcome = runner.run_with_progress(
+                        spp,
+                        &TechniqueLaunch::Command(technique.argv.clone()),
+                        &technique_log,
+                        &mut |delivered, budget| progress(Progress::Samples { delivered, budget }),
+                    );
+                    let image_path = dir.join(format!("{stem}.exr"));
+                    let _ = std::fs::remove_file(&image_path);
+                    let mut status = outcome.status;
+                    let mut message = outcome.message;
+                    let image = match &outcome.image {
+                        Some(rgb) => {
+                            match write_exr(&image_path, outcome.width, outcome.height, rgb) {
+                                Ok(()) => Some(image_path),
+                                Err(e) => {
+                                    status = RunStatus::InvalidOutput;
+                                    message = format!("cannot write the result image: {e}");
+                                    None
+                                }
+                            }
+                        }
+                        None => None,
+                    };
+                    let record = RunRecord {
+                        date,
+                        spp_budget: spp,
+                        samples_budget: outcome.samples_budget,
+                        used_samples: outcome.used_samples,
+                        aborted: status != RunStatus::Ok,
+                        exec_time: outcome.times.technique_ms,
+                        status,
+                        message,
+                        scene: scene_name.clone(),
+                        technique: technique_name.clone(),
+                        width: outcome.width,
+                        height: outcome.height,
+                        times: outcome.times,
+                        peak_memory_bytes: outcome.peak_memory_bytes,
+                        requests: outcome.requests,
+                        image: image.as_ref().map(|_| format!("{stem}.exr")),
+                        technique_log: format!("{stem}_technique.log"),
+                    };
+                    let log_path = dir.join(format!("{stem}_log.json"));
+                    write_json_atomically(&log_path, &record)?;
+                    results.record(&record, &log_path, image.as_deref())?;
+                    progress(Progress::RunFinished(&record));
+                    records.push(record);
+                }
+            }
+            let _ = runner.finish();
+        }
+        Ok(records)
+    }
+}

@@ -1,0 +1,41 @@
+//! The FBKSD manager: runs techniques against renderers and keeps the score.
+//!
+//! The manager is the trusted party of a benchmark run. It starts the
+//! renderer once per scene and the technique once per (scene, budget), meets
+//! them in a fresh rendezvous directory, validates the technique's layout,
+//! enforces the sample budget and the time limit, hands tiles between the
+//! two (it never touches sample data itself), measures time honestly, and
+//! ends every run with a typed [`RunStatus`].
+//!
+//! - [`scene::SceneRunner`]: one scene, one renderer, successive runs.
+//! - [`benchmark::Benchmark`]: techniques × scenes × budgets into a results
+//!   directory ([`results`]).
+//! - [`process`]: supervised child processes (CPU time and peak memory by `wait4`).
+//!
+//! ```no_run
+//! use fbksd_manager::{Benchmark, TechniqueSpec, SceneSpec, Limits};
+//! let bench = Benchmark {
+//!     techniques: vec![TechniqueSpec { name: "box".into(), argv: vec!["./box-filter".into()] }],
+//!     scenes: vec![SceneSpec { name: "gradient".into(), renderer_argv: vec!["fbksd-analytic-renderer".into(), "gradient".into()] }],
+//!     spps: vec![1, 4, 16],
+//!     results: "results".into(),
+//!     limits: Limits::default(),
+//! };
+//! let records = bench.run(|_| {}).unwrap();
+//! ```
+#![deny(missing_docs)]
+
+pub mod benchmark;
+pub mod process;
+pub mod record;
+pub mod results;
+pub mod scene;
+
+pub use benchmark::{Benchmark, Progress, SceneSpec, TechniqueSpec};
+pub use record::{RunRecord, RunStatus, Times};
+pub use scene::{Limits, RunOutcome, SceneRunner, TechniqueLaunch};
+
+use std::time::Duration;
+
+/// The wall-time limit of one run unless overridden (`fbksd run --time-limit`).
+pub const DEFAULT_TIME_LIMIT: Duration = Duration::from_secs(30 * 60);

@@ -1,0 +1,118 @@
+//! What one run produced: its typed status and its measurements.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// How a run ended. Every status but `ok` comes with a message saying why.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunStatus {
+    /// The technique sent a valid result.
+    Ok,
+    /// The technique asked for more samples than its budget.
+    OverBudget,
+    /// The run exceeded its wall-time limit.
+    Timeout,
+    /// The technique died (signal or non-zero exit) before sending a result.
+    Crashed,
+    /// The technique exited cleanly without sending a result.
+    NoResult,
+    /// The result has the wrong size or holds NaN/Inf values.
+    InvalidOutput,
+    /// The technique's sample layout is invalid.
+    InvalidLayout,
+    /// The technique broke the protocol (message out of order, bad slot…).
+    ProtocolError,
+    /// The renderer failed to start, crashed, or delivered wrong samples.
+    RendererFailed,
+    /// The technique could not be started.
+    LaunchFailed,
+}
+
+impl RunStatus {
+    /// The status as written in logs and indexes.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RunStatus::Ok => "ok",
+            RunStatus::OverBudget => "over_budget",
+            RunStatus::Timeout => "timeout",
+            RunStatus::Crashed => "crashed",
+            RunStatus::NoResult => "no_result",
+            RunStatus::InvalidOutput => "invalid_output",
+            RunStatus::InvalidLayout => "invalid_layout",
+            RunStatus::ProtocolError => "protocol_error",
+            RunStatus::RendererFailed => "renderer_failed",
+            RunStatus::LaunchFailed => "launch_failed",
+        }
+    }
+}
+
+impl fmt::Display for RunStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Times of one run, in milliseconds.
+///
+/// `technique` is the honest one: wall time from starting the technique to
+/// its result, minus the time it spent waiting for samples (inside a request
+/// with no tile in its hands). Start-up is included (loading a model is part
+/// of a technique's cost) and also reported alone.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Times {
+    /// Technique time: `wall − waiting`.
+    pub technique_ms: f64,
+    /// Time the technique waited for the renderer.
+    pub waiting_ms: f64,
+    /// Time the renderer spent on requests (request sent → renderer done).
+    pub render_ms: f64,
+    /// Start of the technique process → result (or end of run).
+    pub wall_ms: f64,
+    /// Start of the technique process → its hello.
+    pub startup_ms: f64,
+    /// User + system CPU time of the technique process.
+    pub cpu_ms: f64,
+}
+
+/// Everything recorded about one run; written as `<spp>_0_log.json`.
+///
+/// The first six fields are the original FBKSD log's, kept for
+/// compatibility (`exec_time` is the technique time in ms).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// When the run started (RFC 3339, UTC).
+    pub date: String,
+    /// The budget in samples per pixel.
+    pub spp_budget: u64,
+    /// The budget in samples.
+    pub samples_budget: u64,
+    /// Samples delivered to the technique.
+    pub used_samples: u64,
+    /// Whether the run ended without a valid result.
+    pub aborted: bool,
+    /// Technique time in milliseconds (see [`Times`]).
+    pub exec_time: f64,
+    /// The typed status.
+    pub status: RunStatus,
+    /// Why, for every status but `ok` (empty for `ok`).
+    pub message: String,
+    /// Scene name.
+    pub scene: String,
+    /// Technique name.
+    pub technique: String,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// All times.
+    pub times: Times,
+    /// Peak resident memory of the technique process, in bytes.
+    pub peak_memory_bytes: u64,
+    /// Number of sample requests the technique made.
+    pub requests: u64,
+    /// The result image, relative to the log's directory, when one was received.
+    pub image: Option<String>,
+    /// The technique's output, relative to the log's directory.
+    pub technique_log: String,
+}

@@ -1,0 +1,1262 @@
+//! One scene: a rendezvous directory, a renderer process, and the technique
+//! sessions run against it one after another.
+//!
+//! [`SceneRunner::run`] is the manager's event loop for one run. Every
+//! input — a message from either peer, a connection, a process exit, the
+//! clock — arrives on one channel, so the state machine in [`Session`] is
+//! single-threaded and every end of a run is decided in one place.
+
+use crate::process::{log_tail, report_to, ExitInfo, Supervised};
+use crate::record::{RunStatus, Times};
+use fbksd_core::layout::CompiledLayout;
+use fbksd_core::protocol::{
+    read_frame, write_frame, Amount, ErrorKind, FromRenderer, FromTechnique, Hello, Role,
+    ToRenderer, ToTechnique, PROTOCOL_NAME, PROTOCOL_VERSION,
+};
+use fbksd_core::scene_info::keys;
+use fbksd_core::shm::{Ring, RingSpec, SharedRegion};
+use fbksd_core::{rendezvous, SceneInfo, Tile};
+use std::collections::VecDeque;
+use std::io::BufReader;
+use std::os::unix::fs::PermissionsExt;
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
+use std::time::{Duration, Instant};
+
+/// Default size of one ring slot. Large enough that a hand-off costs far
+/// less than moving the tile's samples; small enough that the ring stays a
+/// few tens of MB.
+pub const DEFAULT_SLOT_BYTES: u64 = 8 << 20;
+
+/// How long a technique has after its result (or a renderer after `finish`)
+/// to exit before it is killed.
+const EXIT_GRACE: Duration = Duration::from_secs(5);
+
+/// Limits that apply to every run.
+#[derive(Debug, Clone)]
+pub struct Limits {
+    /// Wall-time limit of one run (technique start → result); `None` = no limit.
+    pub time_limit: Option<Duration>,
+    /// How long a renderer may take to start and load its scene.
+    pub renderer_start: Duration,
+    /// Bytes per ring slot (at least one pixel's samples at the full budget).
+    pub slot_bytes: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            time_limit: Some(crate::DEFAULT_TIME_LIMIT),
+            renderer_start: Duration::from_secs(300),
+            slot_bytes: DEFAULT_SLOT_BYTES,
+        }
+    }
+}
+
+/// How the technique process comes to be.
+#[derive(Debug, Clone)]
+pub enum TechniqueLaunch {
+    /// The manager starts this command.
+    Command(Vec<String>),
+    /// The technique is already running and connects by itself (debug mode).
+    External,
+}
+
+/// What a run produced.
+#[derive(Debug, Clone)]
+pub struct RunOutcome {
+    /// The typed status.
+    pub status: RunStatus,
+    /// Why (empty for `ok`).
+    pub message: String,
+    /// The result image (`width × height × 3`), when one was received with the right size.
+    pub image: Option<Vec<f32>>,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// The budget in samples.
+    pub samples_budget: u64,
+    /// Samples delivered.
+    pub used_samples: u64,
+    /// Requests made.
+    pub requests: u64,
+    /// Times.
+    pub times: Times,
+    /// Peak RSS of the technique.
+    pub peak_memory_bytes: u64,
+}
+
+enum Event {
+    Connected(UnixStream, Hello),
+    Technique(u64, Result<Option<FromTechnique>, String>),
+    Renderer(u64, Result<Option<FromRenderer>, String>),
+    TechniqueExited(u64, ExitInfo),
+    RendererExited(u64, ExitInfo),
+}
+
+struct RendererConn {
+    process: Supervised,
+    writer: UnixStream,
+    generation: u64,
+    tile_size: u32,
+    scene_info: SceneInfo,
+}
+
+impl RendererConn {
+    fn send(&mut self, message: &ToRenderer) {
+        // A failed write surfaces as the reader's end of stream or the exit event.
+        let _ = write_frame(&mut self.writer, message);
+    }
+}
+
+/// A scene's rendezvous directory and renderer, reused across runs.
+pub struct SceneRunner {
+    dir: tempfile::TempDir,
+    renderer_argv: Vec<String>,
+    renderer_log: Option<PathBuf>,
+    limits: Limits,
+    tx: Sender<Event>,
+    rx: Receiver<Event>,
+    renderer: Option<RendererConn>,
+    renderer_error: Option<String>,
+    generation: u64,
+    sessions: u64,
+    early_techniques: Vec<(UnixStream, Hello)>,
+}
+
+impl SceneRunner {
+    /// Creates the rendezvous directory for a renderer command (whose last
+    /// argument is normally the scene file); the renderer starts on the
+    /// first run. Its output goes to `renderer_log`, or is inherited when `None`.
+    pub fn new(
+        renderer_argv: Vec<String>,
+        renderer_log: Option<PathBuf>,
+        limits: Limits,
+    ) -> std::io::Result<Self> {
+        let dir = tempfile::Builder::new()
+            .prefix("fbksd-run-")
+            .tempdir_in(rendezvous::default_parent())?;
+        // Containers running as another user share this directory; the
+        // directory's own name is unguessable and its parent is not listed to them.
+        std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o700))?;
+        let listener = UnixListener::bind(rendezvous::control_socket(dir.path()))?;
+        let (tx, rx) = channel();
+        let accept_tx = tx.clone();
+        std::thread::Builder::new()
+            .name("fbksd-accept".into())
+            .spawn(move || accept_loop(listener, accept_tx))?;
+        Ok(SceneRunner {
+            dir,
+            renderer_argv,
+            renderer_log,
+            limits,
+            tx,
+            rx,
+            renderer: None,
+            renderer_error: None,
+            generation: 0,
+            sessions: 0,
+            early_techniques: Vec::new(),
+        })
+    }
+
+    /// The rendezvous directory (what `FBKSD_RENDEZVOUS` names).
+    pub fn dir(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// The renderer's scene info, starting the renderer if needed.
+    pub fn scene_info(&mut self) -> Result<(SceneInfo, u32), String> {
+        self.ensure_renderer()?;
+        let r = self.renderer.as_ref().expect("renderer just started");
+        Ok((r.scene_info.clone(), r.tile_size))
+    }
+
+    fn next_generation(&mut self) -> u64 {
+        self.generation += 1;
+        self.generation
+    }
+
+    fn ensure_renderer(&mut self) -> Result<(), String> {
+        if self.renderer.is_some() {
+            return Ok(());
+        }
+        let result = self.start_renderer();
+        if let Err(e) = &result {
+            self.renderer_error = Some(e.clone());
+        }
+        result
+    }
+
+    fn start_renderer(&mut self) -> Result<(), String> {
+        let generation = self.next_generation();
+        let on_exit = report_to(self.tx.clone(), move |info| {
+            Event::RendererExited(generation, info)
+        });
+        let env = [(rendezvous::ENV_VAR, self.dir.path())];
+        let process = Supervised::spawn(
+            &self.renderer_argv,
+            &env,
+            self.renderer_log.as_deref(),
+            on_exit,
+        )
+        .map_err(|e| format!("renderer {}: {e}", shell_words::join(&self.renderer_argv)))?;
+        let deadline = Instant::now() + self.limits.renderer_start;
+        let mut writer: Option<UnixStream> = None;
+        let fail = |process: &Supervised, why: String| {
+            process.kill();
+            Err(format!("{why}{}", log_note(self.renderer_log.as_deref())))
+        };
+        loop {
+            let event = match self
+                .rx
+                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            {
+                Ok(e) => e,
+                Err(_) => {
+                    return fail(
+                        &process,
+                        format!(
+                            "the renderer did not become ready within {:?}",
+                            self.limits.renderer_start
+                        ),
+                    )
+                }
+            };
+            match event {
+                Event::Connected(stream, hello)
+                    if hello.role == Role::Renderer && writer.is_none() =>
+                {
+                    let mut w = match stream.try_clone() {
+                        Ok(w) => w,
+                        Err(e) => return fail(&process, format!("renderer connection: {e}")),
+                    };
+                    let _ = write_frame(
+                        &mut w,
+                        &ToRenderer::Welcome {
+                            version: PROTOCOL_VERSION,
+                        },
+                    );
+                    spawn_reader(stream, self.tx.clone(), move |m| {
+                        Event::Renderer(generation, m)
+                    });
+                    writer = Some(w);
+                }
+                Event::Connected(stream, hello) if hello.role == Role::Technique => {
+                    self.early_techniques.push((stream, hello));
+                }
+                Event::Connected(mut stream, _) => {
+                    refuse(&mut stream, "a renderer is already connected to this run");
+                }
+                Event::Renderer(
+                    g,
+                    Ok(Some(FromRenderer::Ready {
+                        tile_size,
+                        scene_info,
+                    })),
+                ) if g == generation => {
+                    if let Err(e) = scene_info.width().and(scene_info.height()) {
+                        return fail(
+                            &process,
+                            format!("the renderer's scene info is unusable: {e}"),
+                        );
+                    }
+                    let writer = writer.take().expect("ready comes after connect");
+                    self.renderer = Some(RendererConn {
+                        process,
+                        writer,
+                        generation,
+                        tile_size: tile_size.max(1),
+                        scene_info,
+                    });
+                    return Ok(());
+                }
+                Event::Renderer(g, Ok(Some(FromRenderer::Failed { message })))
+                    if g == generation =>
+                {
+                    return fail(&process, format!("the renderer failed to start: {message}"));
+                }
+                Event::Renderer(g, other) if g == generation => {
+                    return fail(
+                        &process,
+                        format!("the renderer sent {other:?} instead of ready"),
+                    );
+                }
+                Event::RendererExited(g, info) if g == generation => {
+                    return fail(
+                        &process,
+                        format!(
+                            "the renderer exited ({}) before it was ready",
+                            info.describe()
+                        ),
+                    );
+                }
+                _ => {} // stale events of earlier processes
+            }
+        }
+    }
+
+    fn drop_renderer(&mut self) {
+        if let Some(r) = self.renderer.take() {
+            r.process.kill();
+        }
+    }
+
+    /// Runs one technique session with a budget of `spp` samples per pixel.
+    pub fn run(&mut self, spp: u64, launch: &TechniqueLaunch, technique_log: &Path) -> RunOutcome {
+        self.run_with_progress(spp, launch, technique_log, &mut |_, _| {})
+    }
+
+    /// As [`Self::run`], calling `progress(delivered, budget)` a few times a
+    /// second while samples flow.
+    pub fn run_with_progress(
+        &mut self,
+        spp: u64,
+        launch: &TechniqueLaunch,
+        technique_log: &Path,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> RunOutcome {
+        let mut outcome = RunOutcome {
+            status: RunStatus::Ok,
+            message: String::new(),
+            image: None,
+            width: 0,
+            height: 0,
+            samples_budget: 0,
+            used_samples: 0,
+            requests: 0,
+            times: Times::default(),
+            peak_memory_bytes: 0,
+        };
+        if let Err(e) = self.ensure_renderer() {
+            outcome.status = RunStatus::RendererFailed;
+            outcome.message = e;
+            return outcome;
+        }
+        self.sessions += 1;
+        let session_id = self.sessions;
+        let technique_generation = self.next_generation();
+        let renderer = self.renderer.as_mut().expect("ensured");
+        let (width, height) = (
+            renderer.scene_info.width().unwrap(),
+            renderer.scene_info.height().unwrap(),
+        );
+        let pixels = width as u64 * height as u64;
+        outcome.width = width;
+        outcome.height = height;
+        outcome.samples_budget = spp.saturating_mul(pixels);
+
+        let mut info = renderer.scene_info.clone();
+        info.set(keys::MAX_SPP, spp as i64)
+            .set(keys::MAX_SAMPLES, outcome.samples_budget as i64);
+        let result_file = format!("result-{session_id}.f32");
+        let result_path = self.dir.path().join(&result_file);
+        let result_region = match SharedRegion::create(&result_path, pixels * 12) {
+            Ok(r) => r,
+            Err(e) => {
+                outcome.status = RunStatus::LaunchFailed;
+                outcome.message = format!("cannot create the result buffer: {e}");
+                return outcome;
+            }
+        };
+
+        let started = Instant::now();
+        let technique = match launch {
+            TechniqueLaunch::Command(argv) => {
+                let on_exit = report_to(self.tx.clone(), move |i| {
+                    Event::TechniqueExited(technique_generation, i)
+                });
+                match Supervised::spawn(
+                    argv,
+                    &[(rendezvous::ENV_VAR, self.dir.path())],
+                    Some(technique_log),
+                    on_exit,
+                ) {
+                    Ok(p) => Some(p),
+                    Err(e) => {
+                        let _ = std::fs::remove_file(&result_path);
+                        outcome.status = RunStatus::LaunchFailed;
+                        outcome.message = e.to_string();
+                        return outcome;
+                    }
+                }
+            }
+            TechniqueLaunch::External => None,
+        };
+
+        let mut s = Session {
+            dir: self.dir.path().to_path_buf(),
+            id: session_id,
+            generation: technique_generation,
+            spawned: technique.is_some(),
+            width,
+            height,
+            spp,
+            pipe_size: 0,
+            slot_bytes_default: self.limits.slot_bytes,
+            info,
+            result_file,
+            writer: None,
+            hello_at: None,
+            layout: None,
+            layout_pending: None,
+            ring: None,
+            budget: outcome.samples_budget,
+            used: 0,
+            requests: 0,
+            active: None,
+            slots: Vec::new(),
+            free: VecDeque::new(),
+            queued: VecDeque::new(),
+            held: 0,
+            waiting_since: None,
+            waiting: Duration::ZERO,
+            render_started: None,
+            render_time: Duration::ZERO,
+            result_at: None,
+            image: None,
+            renderer_broken: false,
+            exit: None,
+        };
+        for (stream, hello) in std::mem::take(&mut self.early_techniques) {
+            s.connect(stream, hello, &self.tx);
+        }
+
+        let deadline = self.limits.time_limit.map(|l| started + l);
+        let (status, message) = self.event_loop(&mut s, &result_region, deadline, progress);
+
+        // Clean up: the technique, then the renderer (restarted next time if
+        // the session left it mid-request), then the shared files.
+        if let Some(p) = &technique {
+            p.kill();
+            if s.exit.is_none() {
+                s.exit = self.wait_technique_exit(technique_generation, Duration::from_secs(2));
+            }
+        }
+        if s.renderer_broken || s.active.is_some() {
+            self.drop_renderer();
+        } else if let Some(r) = self.renderer.as_mut() {
+            r.send(&ToRenderer::EndSession);
+        }
+        let _ = std::fs::remove_file(&result_path);
+        if let Some(ring) = s.ring {
+            let _ = std::fs::remove_file(self.dir.path().join(ring.file_name()));
+        }
+
+        let end = s.result_at.unwrap_or_else(Instant::now);
+        let wall = end - started;
+        let waiting = s.waiting
+            + s.waiting_since
+                .map_or(Duration::ZERO, |w| end.saturating_duration_since(w));
+        outcome.times = Times {
+            technique_ms: ms(wall.saturating_sub(waiting)),
+            waiting_ms: ms(waiting),
+            render_ms: ms(s.render_time),
+            wall_ms: ms(wall),
+            startup_ms: s.hello_at.map_or(0.0, |h| ms(h - started)),
+            cpu_ms: s.exit.as_ref().map_or(0.0, |e| ms(e.cpu_time)),
+        };
+        outcome.peak_memory_bytes = s.exit.as_ref().map_or(0, |e| e.peak_rss);
+        outcome.used_samples = s.used + s.active.as_ref().map_or(0, |a| a.delivered);
+        outcome.requests = s.requests;
+        outcome.image = s.image.take();
+        outcome.status = status;
+        outcome.message = message;
+        outcome
+    }
+
+    fn wait_technique_exit(&self, generation: u64, within: Duration) -> Option<ExitInfo> {
+        wait_exit(&self.rx, within, |e| match e {
+            Event::TechniqueExited(g, info) if g == generation => Some(info),
+            _ => None,
+        })
+    }
+
+    fn wait_renderer_exit(&self, generation: u64, within: Duration) -> Option<ExitInfo> {
+        wait_exit(&self.rx, within, |e| match e {
+            Event::RendererExited(g, info) if g == generation => Some(info),
+            _ => None,
+        })
+    }
+
+    fn event_loop(
+        &mut self,
+        s: &mut Session,
+        result: &SharedRegion,
+        deadline: Option<Instant>,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> (RunStatus, String) {
+        let mut last_report = Instant::now();
+        // After the result (or after the technique hangs up) the technique
+        // has a short grace to exit; the run's verdict is already known.
+        let mut verdict: Option<(RunStatus, String)> = None;
+        let mut grace_deadline: Option<Instant> = None;
+        loop {
+            let wake = [deadline, grace_deadline].into_iter().flatten().min();
+            let event = match wake {
+                Some(t) => match self
+                    .rx
+                    .recv_timeout(t.saturating_duration_since(Instant::now()))
+                {
+                    Ok(e) => e,
+                    Err(RecvTimeoutError::Timeout) => {
+                        if let Some(v) = verdict {
+                            return v;
+                        }
+                        if grace_deadline.is_some_and(|g| Instant::now() >= g) {
+                            return (
+                                RunStatus::NoResult,
+                                "the technique closed its connection without sending a result"
+                                    .into(),
+                            );
+                        }
+                        return s.timeout_verdict(self.limits.time_limit.unwrap_or_default());
+                    }
+                    Err(RecvTimeoutError::Disconnected) => {
+                        unreachable!("the runner holds a sender")
+                    }
+                },
+                None => self.rx.recv().expect("the runner holds a sender"),
+            };
+            let renderer = self
+                .renderer
+                .as_mut()
+                .expect("a session runs with a renderer");
+            let end = match event {
+                Event::Connected(stream, hello) => {
+                    s.connect(stream, hello, &self.tx);
+                    None
+                }
+                Event::Technique(g, message) if g == s.generation => match message {
+                    Ok(Some(m)) => s.on_technique(m, renderer, result),
+                    Ok(None) | Err(_) if verdict.is_some() => None,
+                    Ok(None) => {
+                        grace_deadline.get_or_insert(Instant::now() + Duration::from_secs(3));
+                        None
+                    }
+                    Err(e) => Some((
+                        RunStatus::ProtocolError,
+                        format!("technique connection: {e}"),
+                    )),
+                },
+                Event::Renderer(g, message) if g == renderer.generation => match message {
+                    Ok(Some(m)) => {
+                        let end = s.on_renderer(m, renderer);
+                        if last_report.elapsed() >= Duration::from_millis(250) {
+                            last_report = Instant::now();
+                            progress(
+                                s.used + s.active.as_ref().map_or(0, |a| a.delivered),
+                                s.budget,
+                            );
+                        }
+                        end
+                    }
+                    Ok(None) => {
+                        s.renderer_broken = true;
+                        let generation = renderer.generation;
+                        // The exit status says more than the hang-up: wait a moment for it.
+                        let why = match self.wait_renderer_exit(generation, Duration::from_secs(2))
+                        {
+                            Some(info) => {
+                                format!("the renderer died ({}) during the run", info.describe())
+                            }
+                            None => "the renderer closed its connection".into(),
+                        };
+                        Some((
+                            RunStatus::RendererFailed,
+                            format!("{why}{}", log_note(self.renderer_log.as_deref())),
+                        ))
+                    }
+                    Err(e) => {
+                        s.renderer_broken = true;
+                        Some((
+                            RunStatus::RendererFailed,
+                            format!("renderer connection: {e}"),
+                        ))
+                    }
+                },
+                Event::TechniqueExited(g, info) if g == s.generation => {
+                    let status = info.status;
+                    s.exit = Some(info);
+                    if let Some(v) = verdict {
+                        return v;
+                    }
+                    Some(if status.success() {
+                        (
+                            RunStatus::NoResult,
+                            "the technique exited (exit code 0) without sending a result".into(),
+                        )
+                    } else {
+                        (
+                            RunStatus::Crashed,
+                            format!(
+                                "the technique died ({}) before sending a result",
+                                crate::process::describe_status(status)
+                            ),
+                        )
+                    })
+                }
+                Event::RendererExited(g, info) if g == renderer.generation => {
+                    s.renderer_broken = true;
+                    Some((
+                        RunStatus::RendererFailed,
+                        format!(
+                            "the renderer died ({}) during the run{}",
+                            info.describe(),
+                            log_note(self.renderer_log.as_deref())
+                        ),
+                    ))
+                }
+                _ => None,
+            };
+            if let Some(v) = end {
+                if v.0 == RunStatus::Ok && s.exit.is_none() && s.spawned {
+                    // Result accepted: give the technique its grace to exit.
+                    verdict = Some(v);
+                    grace_deadline = Some(Instant::now() + EXIT_GRACE);
+                } else if verdict.is_none() {
+                    return v;
+                }
+            }
+        }
+    }
+
+    /// Tells the renderer to finish and waits briefly for it to exit;
+    /// returns how it ended (CPU time, peak memory) when it did.
+    pub fn finish(mut self) -> Option<ExitInfo> {
+        let mut r = self.renderer.take()?;
+        r.send(&ToRenderer::Finish);
+        let exit = self.wait_renderer_exit(r.generation, EXIT_GRACE);
+        if exit.is_none() {
+            r.process.kill();
+        }
+        exit
+    }
+}
+
+impl Drop for SceneRunner {
+    fn drop(&mut self) {
+        self.drop_renderer();
+    }
+}
+
+/// "; renderer log (path):\n<last lines>", or nothing when there is no log.
+fn log_note(log: Option<&Path>) -> String {
+    let Some(log) = log else { return String::new() };
+    let tail = log_tail(log, 20);
+    if tail.is_empty() {
+        String::new()
+    } else {
+        format!("; renderer log ({}):\n{tail}", log.display())
+    }
+}
+
+/// Waits up to `within` for the event `pick` selects, dropping others
+/// (the run they belong to is ending).
+fn wait_exit(
+    rx: &Receiver<Event>,
+    within: Duration,
+    pick: impl Fn(Event) -> Option<ExitInfo>,
+) -> Option<ExitInfo> {
+    let deadline = Instant::now() + within;
+    loop {
+        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok(e) => {
+                if let Some(info) = pick(e) {
+                    return Some(info);
+                }
+            }
+            Err(_) => return None,
+        }
+    }
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn accept_loop(listener: UnixListener, tx: Sender<Event>) {
+    for stream in listener.incoming() {
+        let Ok(mut stream) = stream else { continue };
+        let tx = tx.clone();
+        // Read the hello off the acceptor thread so a silent peer blocks no one.
+        std::thread::spawn(move || {
+            let _ = stream.set_read_timeout(Some(Duration::from_secs(10)));
+            let hello = read_frame::<_, Hello>(&mut stream);
+            let _ = stream.set_read_timeout(None);
+            match hello {
+                Ok(Some(h)) if h.protocol == PROTOCOL_NAME && h.version == PROTOCOL_VERSION => {
+                    let _ = tx.send(Event::Connected(stream, h));
+                }
+                Ok(Some(h)) => refuse_kind(
+                    &mut stream,
+                    ErrorKind::VersionMismatch,
+                    &format!(
+                        "this manager speaks {PROTOCOL_NAME} protocol version {PROTOCOL_VERSION}; the peer speaks {:?} version {}: rebuild it against this SDK",
+                        h.protocol, h.version
+                    ),
+                ),
+                Ok(None) => {}
+                Err(e) => refuse_kind(&mut stream, ErrorKind::Protocol, &format!("expected a hello frame: {e}")),
+            }
+        });
+    }
+}
+
+fn refuse(stream: &mut UnixStream, why: &str) {
+    refuse_kind(stream, ErrorKind::Protocol, why);
+}
+
+fn refuse_kind(stream: &mut UnixStream, kind: ErrorKind, why: &str) {
+    let _ = write_frame(
+        stream,
+        &ToTechnique::Error {
+            kind,
+            message: why.to_string(),
+        },
+    );
+}
+
+fn spawn_reader<T, F>(stream: UnixStream, tx: Sender<Event>, wrap: F)
+where
+    T: serde::de::DeserializeOwned + Send + 'static,
+    F: Fn(Result<Option<T>, String>) -> Event + Send + 'static,
+{
+    std::thread::spawn(move || {
+        let mut reader = BufReader::new(stream);
+        loop {
+            let message = read_frame::<_, T>(&mut reader).map_err(|e| e.to_string());
+            let stop = !matches!(message, Ok(Some(_)));
+            if tx.send(wrap(message)).is_err() || stop {
+                return;
+            }
+        }
+    });
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Slot {
+    Free,
+    Producing { id: u64, tile: Tile },
+    Rendering { tile: Tile },
+    Consuming,
+}
+
+struct Active {
+    input: bool,
+    spp: u64,
+    pixel_expected: u64,
+    free_expected: u64,
+    pixel_acquired: u64,
+    free_acquired: u64,
+    delivered: u64,
+    renderer_done: bool,
+}
+
+impl Active {
+    fn expected(&self) -> u64 {
+        self.pixel_expected + self.free_expected
+    }
+}
+
+type End = Option<(RunStatus, String)>;
+
+/// The state of one technique session.
+struct Session {
+    dir: PathBuf,
+    id: u64,
+    generation: u64,
+    /// Whether the manager started the technique (so it can wait for its exit).
+    spawned: bool,
+    width: u32,
+    height: u32,
+    spp: u64,
+    pipe_size: u64,
+    slot_bytes_default: u64,
+    info: SceneInfo,
+    result_file: String,
+    writer: Option<UnixStream>,
+    hello_at: Option<Instant>,
+    layout: Option<CompiledLayout>,
+    layout_pending: Option<(CompiledLayout, RingSpec)>,
+    ring: Option<RingSpec>,
+    budget: u64,
+    used: u64,
+    requests: u64,
+    active: Option<Active>,
+    slots: Vec<Slot>,
+    free: VecDeque<u32>,
+    queued: VecDeque<(u64, Tile)>,
+    /// Slots in the technique's hands (producing or consuming).
+    held: usize,
+    waiting_since: Option<Instant>,
+    waiting: Duration,
+    render_started: Option<Instant>,
+    render_time: Duration,
+    result_at: Option<Instant>,
+    image: Option<Vec<f32>>,
+    renderer_broken: bool,
+    exit: Option<ExitInfo>,
+}
+
+impl Session {
+    fn connect(&mut self, mut stream: UnixStream, hello: Hello, tx: &Sender<Event>) {
+        if hello.role != Role::Technique {
+            return refuse(&mut stream, "a renderer is already connected to this run");
+        }
+        if self.writer.is_some() {
+            return refuse(
+                &mut stream,
+                "another technique is already connected to this run",
+            );
+        }
+        let Ok(mut writer) = stream.try_clone() else {
+            return;
+        };
+        let _ = writer.set_write_timeout(Some(Duration::from_secs(30)));
+        let _ = write_frame(
+            &mut writer,
+            &ToTechnique::Welcome {
+                version: PROTOCOL_VERSION,
+                scene_info: self.info.clone(),
+                result_file: self.result_file.clone(),
+            },
+        );
+        let generation = self.generation;
+        spawn_reader(stream, tx.clone(), move |m| Event::Technique(generation, m));
+        self.writer = Some(writer);
+        self.hello_at = Some(Instant::now());
+    }
+
+    fn send(&mut self, message: &ToTechnique) {
+        if let Some(w) = self.writer.as_mut() {
+            // A failed write surfaces as the reader's end of stream or the exit event.
+            let _ = write_frame(w, message);
+        }
+    }
+
+    /// Ends the session with an error the technique is told about too.
+    fn refuse(&mut self, status: RunStatus, kind: ErrorKind, message: String) -> End {
+        self.send(&ToTechnique::Error {
+            kind,
+            message: message.clone(),
+        });
+        Some((status, message))
+    }
+
+    fn protocol_error(&mut self, message: String) -> End {
+        self.refuse(RunStatus::ProtocolError, ErrorKind::Protocol, message)
+    }
+
+    fn renderer_failed(&mut self, message: String) -> End {
+        self.renderer_broken = true;
+        self.refuse(
+            RunStatus::RendererFailed,
+            ErrorKind::RendererFailed,
+            message,
+        )
+    }
+
+    fn timeout_verdict(&self, limit: Duration) -> (RunStatus, String) {
+        let limit = humantime::format_duration(limit);
+        if self.writer.is_none() {
+            return (
+                RunStatus::Timeout,
+                format!("the technique did not connect within the time limit of {limit}"),
+            );
+        }
+        match &self.active {
+            Some(a) if self.held == 0 => (
+                RunStatus::RendererFailed,
+                format!(
+                    "the time limit of {limit} expired while the technique waited for the renderer ({} of {} samples delivered)",
+                    a.delivered,
+                    a.expected()
+                ),
+            ),
+            _ => (RunStatus::Timeout, format!("the technique exceeded the time limit of {limit}")),
+        }
+    }
+
+    fn hand_to_technique(&mut self, message: ToTechnique) {
+        if self.held == 0 {
+            if let Some(since) = self.waiting_since.take() {
+                self.waiting += since.elapsed();
+            }
+        }
+        self.held += 1;
+        self.send(&message);
+    }
+
+    fn take_back_from_technique(&mut self) {
+        self.held -= 1;
+        if self.held == 0 && self.active.is_some() {
+            self.waiting_since = Some(Instant::now());
+        }
+    }
+
+    fn slot_state(&self, slot: u32) -> Option<Slot> {
+        self.slots.get(slot as usize).copied()
+    }
+
+    fn on_technique(
+        &mut self,
+        message: FromTechnique,
+        renderer: &mut RendererConn,
+        result: &SharedRegion,
+    ) -> End {
+        match message {
+            FromTechnique::SetLayout { layout } => {
+                if self.layout.is_some() || self.layout_pending.is_some() {
+                    return self
+                        .protocol_error("set_layout may be called only once per run".into());
+                }
+                let compiled = match layout.compile() {
+                    Ok(c) => c,
+                    Err(e) => {
+                        return self.refuse(
+                            RunStatus::InvalidLayout,
+                            ErrorKind::InvalidLayout,
+                            e.to_string(),
+                        )
+                    }
+                };
+                let sample_bytes = compiled.sample_size() as u64 * 4;
+                // A slot holds at least one pixel at the full budget, so any SPP tile fits.
+                let slot_bytes = self
+                    .slot_bytes_default
+                    .max(self.spp.max(1) * sample_bytes)
+                    .next_multiple_of(4096);
+                let slot_count = std::thread::available_parallelism()
+                    .map_or(2, |n| n.get())
+                    .clamp(2, 7) as u32
+                    * 2
+                    + 2;
+                let spec = RingSpec {
+                    session: self.id,
+                    slot_count,
+                    slot_bytes,
+                };
+                if let Err(e) = Ring::create_file(&self.dir, spec) {
+                    return self.renderer_failed(format!("cannot create the sample ring: {e}"));
+                }
+                self.pipe_size = spec.slot_samples(compiled.sample_size());
+                self.slots = vec![Slot::Free; slot_count as usize];
+                self.free = (0..slot_count).collect();
+                renderer.send(&ToRenderer::SetLayout {
+                    layout: compiled.source().clone(),
+                    ring: spec,
+                });
+                self.ring = Some(spec);
+                self.layout_pending = Some((compiled, spec));
+                None
+            }
+            FromTechnique::Evaluate { amount, input } => {
+                self.start_request(amount, input, renderer)
+            }
+            FromTechnique::Produced { slot } => {
+                let Some(Slot::Producing { id, tile }) = self.slot_state(slot) else {
+                    return self.protocol_error(format!(
+                        "produced slot {slot}, which the technique was not asked to fill"
+                    ));
+                };
+                self.slots[slot as usize] = Slot::Rendering { tile };
+                self.take_back_from_technique();
+                renderer.send(&ToRenderer::Granted { id, slot });
+                None
+            }
+            FromTechnique::Consumed { slot } => {
+                let Some(Slot::Consuming) = self.slot_state(slot) else {
+                    return self.protocol_error(format!(
+                        "consumed slot {slot}, which the technique did not hold"
+                    ));
+                };
+                self.slots[slot as usize] = Slot::Free;
+                self.free.push_back(slot);
+                self.take_back_from_technique();
+                if let Some((id, tile)) = self.queued.pop_front() {
+                    self.grant(id, tile, renderer);
+                }
+                self.check_complete()
+            }
+            FromTechnique::SendResult {
+                width,
+                height,
+                channels,
+            } => {
+                if self.active.is_some() {
+                    return self.protocol_error("send_result during a sample request".into());
+                }
+                if (width, height, channels) != (self.width, self.height, 3) {
+                    return self.refuse(
+                        RunStatus::InvalidOutput,
+                        ErrorKind::InvalidOutput,
+                        format!(
+                            "the result is {width}×{height}×{channels} but the scene is {}×{}×3",
+                            self.width, self.height
+                        ),
+                    );
+                }
+                self.result_at = Some(Instant::now());
+                // SAFETY: the technique handed the result buffer over with this message.
+                let pixels = unsafe { result.floats(0, result.len() / 4) }.to_vec();
+                let bad = pixels.iter().filter(|v| !v.is_finite()).count();
+                let first_bad = pixels.iter().position(|v| !v.is_finite());
+                self.image = Some(pixels);
+                self.send(&ToTechnique::ResultAccepted);
+                if let Some(i) = first_bad {
+                    let px = i / 3;
+                    return Some((
+                        RunStatus::InvalidOutput,
+                        format!(
+                            "the result has {bad} NaN or infinite values (first at pixel x={}, y={}); the image is kept for inspection",
+                            px % self.width as usize,
+                            px / self.width as usize
+                        ),
+                    ));
+                }
+                Some((RunStatus::Ok, String::new()))
+            }
+        }
+    }
+
+    fn start_request(&mut self, amount: Amount, input: bool, renderer: &mut RendererConn) -> End {
+        let Some(layout) = &self.layout else {
+            return self.protocol_error("evaluate before set_layout".into());
+        };
+        if self.active.is_some() {
+            return self.protocol_error("evaluate while another request is in progress".into());
+        }
+        let layout_has_input = layout.has_input();
+        if input && !layout_has_input {
+            return self.refuse(
+                RunStatus::ProtocolError,
+                ErrorKind::BadRequest,
+                "evaluate_input_samples needs INPUT random parameters in the layout".into(),
+            );
+        }
+        if !input && layout_has_input {
+            return self.refuse(
+                RunStatus::ProtocolError,
+                ErrorKind::BadRequest,
+                "the layout has INPUT random parameters: request samples with evaluate_input_samples".into(),
+            );
+        }
+        let pixels = self.width as u64 * self.height as u64;
+        let (samples, what) = match amount {
+            Amount::Spp(n) => (n.checked_mul(pixels), format!("{n} spp × {pixels} pixels")),
+            Amount::Samples(n) => (Some(n), format!("{n} samples")),
+        };
+        let remaining = self.budget - self.used;
+        let samples = match samples {
+            Some(0) => return self.refuse(RunStatus::ProtocolError, ErrorKind::BadRequest, "a request for 0 samples".into()),
+            Some(s) if s <= remaining => s,
+            _ => {
+                return self.refuse(
+                    RunStatus::OverBudget,
+                    ErrorKind::OverBudget,
+                    format!(
+                        "requested {what} but only {remaining} of the budget of {} samples ({} spp) remain",
+                        self.budget, self.spp
+                    ),
+                )
+            }
+        };
+        // Count requests without INPUT come as whole spp plus a remainder, so
+        // the renderer can stratify; with INPUT the technique places every sample.
+        let (spp, free) = match amount {
+            Amount::Spp(n) => (n, 0),
+            Amount::Samples(n) if input => (0, n),
+            Amount::Samples(n) => (n / pixels, n % pixels),
+        };
+        self.requests += 1;
+        self.active = Some(Active {
+            input,
+            spp,
+            pixel_expected: spp * pixels,
+            free_expected: free,
+            pixel_acquired: 0,
+            free_acquired: 0,
+            delivered: 0,
+            renderer_done: false,
+        });
+        debug_assert_eq!(spp * pixels + free, samples);
+        self.waiting_since = Some(Instant::now());
+        self.render_started = Some(Instant::now());
+        renderer.send(&ToRenderer::Evaluate {
+            spp,
+            remaining: free,
+            pipe_size: self.pipe_size,
+            input,
+            request: self.requests - 1,
+        });
+        None
+    }
+
+    fn grant(&mut self, id: u64, tile: Tile, renderer: &mut RendererConn) {
+        let slot = self.free.pop_front().expect("grant with a free slot");
+        if self.active.as_ref().is_some_and(|a| a.input) {
+            self.slots[slot as usize] = Slot::Producing { id, tile };
+            self.hand_to_technique(ToTechnique::Produce { slot, tile });
+        } else {
+            self.slots[slot as usize] = Slot::Rendering { tile };
+            renderer.send(&ToRenderer::Granted { id, slot });
+        }
+    }
+
+    fn on_renderer(&mut self, message: FromRenderer, renderer: &mut RendererConn) -> End {
+        match message {
+            FromRenderer::LayoutAccepted => {
+                let Some((compiled, ring)) = self.layout_pending.take() else {
+                    return self
+                        .renderer_failed("the renderer accepted a layout nobody set".into());
+                };
+                self.send(&ToTechnique::LayoutSet {
+                    ring,
+                    sample_size: compiled.sample_size() as u32,
+                });
+                self.layout = Some(compiled);
+                None
+            }
+            FromRenderer::Failed { message } if self.layout_pending.is_some() => {
+                self.layout_pending = None;
+                self.refuse(
+                    RunStatus::InvalidLayout,
+                    ErrorKind::InvalidLayout,
+                    format!("the renderer rejected the layout: {message}"),
+                )
+            }
+            FromRenderer::Failed { message } => {
+                self.renderer_failed(format!("the renderer failed: {message}"))
+            }
+            FromRenderer::Acquire { id, tile } => {
+                if let Err(why) = self.check_tile(&tile) {
+                    return self.renderer_failed(format!(
+                        "the renderer asked for an invalid tile {tile:?}: {why}"
+                    ));
+                }
+                if self.free.is_empty() {
+                    self.queued.push_back((id, tile));
+                } else {
+                    self.grant(id, tile, renderer);
+                }
+                None
+            }
+            FromRenderer::Filled { slot, count } => {
+                let Some(Slot::Rendering { tile }) = self.slot_state(slot) else {
+                    return self.renderer_failed(format!(
+                        "the renderer filled slot {slot}, which it did not hold"
+                    ));
+                };
+                if count != tile.sample_count() {
+                    return self.renderer_failed(format!(
+                        "the renderer filled slot {slot} with {count} samples; its tile has {}",
+                        tile.sample_count()
+                    ));
+                }
+                self.slots[slot as usize] = Slot::Consuming;
+                if let Some(a) = self.active.as_mut() {
+                    a.delivered += count;
+                }
+                self.hand_to_technique(ToTechnique::Consume { slot, tile });
+                None
+            }
+            FromRenderer::EvaluateDone => {
+                let Some(a) = self.active.as_mut() else {
+                    return self
+                        .renderer_failed("the renderer finished a request nobody made".into());
+                };
+                a.renderer_done = true;
+                if let Some(t) = self.render_started.take() {
+                    self.render_time += t.elapsed();
+                }
+                self.check_complete()
+            }
+            FromRenderer::Ready { .. } => {
+                self.renderer_failed("the renderer sent ready twice".into())
+            }
+        }
+    }
+
+    fn check_tile(&mut self, tile: &Tile) -> Result<(), String> {
+        let Some(a) = self.active.as_mut() else {
+            return Err("no request is in progress".into());
+        };
+        let n = tile.sample_count();
+        if n == 0 || n > self.pipe_size {
+            return Err(format!("{n} samples, pipe size is {}", self.pipe_size));
+        }
+        match tile {
+            Tile::Pixels { rect, spp } => {
+                if *spp as u64 != a.spp || !rect.is_inside(self.width, self.height) {
+                    return Err(format!(
+                        "request is {} spp on {}×{}",
+                        a.spp, self.width, self.height
+                    ));
+                }
+                a.pixel_acquired += n;
+                if a.pixel_acquired > a.pixel_expected {
+                    return Err(format!(
+                        "more pixel samples than the {} requested",
+                        a.pixel_expected
+                    ));
+                }
+            }
+            Tile::Samples { .. } => {
+                a.free_acquired += n;
+                if a.free_acquired > a.free_expected {
+                    return Err(format!(
+                        "more free samples than the {} requested",
+                        a.free_expected
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn check_complete(&mut self) -> End {
+        let Some(a) = &self.active else { return None };
+        if !a.renderer_done
+            || self
+                .slots
+                .iter()
+                .any(|s| !matches!(s, Slot::Free | Slot::Rendering { .. }))
+        {
+            return None;
+        }
+        if self
+            .slots
+            .iter()
+            .any(|s| matches!(s, Slot::Rendering { .. }))
+            || !self.queued.is_empty()
+        {
+            return self.renderer_failed(
+                "the renderer reported the request done with tiles acquired but never filled"
+                    .into(),
+            );
+        }
+        if a.delivered != a.expected() {
+            let msg = format!(
+                "the renderer finished a request with {} of its {} samples",
+                a.delivered,
+                a.expected()
+            );
+            return self.renderer_failed(msg);
+        }
+        let delivered = a.delivered;
+        self.used += delivered;
+        self.active = None;
+        if let Some(since) = self.waiting_since.take() {
+            self.waiting += since.elapsed();
+        }
+        let remaining = self.budget - self.used;
+        self.send(&ToTechnique::EvaluateDone {
+            delivered,
+            remaining,
+        });
+        None
+    }
+}
