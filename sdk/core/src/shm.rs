@@ -97,10 +97,10 @@ impl SharedRegion {
                 actual: 0,
             });
         }
-        // Populate: fault every page in now, not on the first tile.
+        // Not populated: a process's peak RSS then counts only the pages it
+        // really touched (peak memory is one of the benchmark's measures).
         let map = MmapOptions::new()
             .len(len as usize)
-            .populate()
             .map_raw(&file)
             .map_err(|source| ShmError::Io {
                 path: path.to_path_buf(),

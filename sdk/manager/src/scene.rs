@@ -924,16 +924,20 @@ impl Session {
                     }
                 };
                 let sample_bytes = compiled.sample_size() as u64 * 4;
-                // A slot holds at least one pixel at the full budget, so any SPP tile fits.
-                let slot_bytes = self
-                    .slot_bytes_default
-                    .max(self.spp.max(1) * sample_bytes)
-                    .next_multiple_of(4096);
                 let slot_count = std::thread::available_parallelism()
                     .map_or(2, |n| n.get())
                     .clamp(2, 7) as u32
                     * 2
                     + 2;
+                // A slot holds at least one pixel at the full budget, so any SPP
+                // tile fits; it need not hold more than the whole budget spread
+                // over the ring (small images get small rings).
+                let whole_budget = (self.budget * sample_bytes).div_ceil(slot_count as u64);
+                let slot_bytes = self
+                    .slot_bytes_default
+                    .min(whole_budget)
+                    .max(self.spp.max(1) * sample_bytes)
+                    .next_multiple_of(4096);
                 let spec = RingSpec {
                     session: self.id,
                     slot_count,

@@ -54,12 +54,13 @@ pub enum RendererError {
 
 type BoxError = Box<dyn std::error::Error + Send + Sync>;
 type EvaluateFn = dyn Fn(&Evaluation) -> Result<(), BoxError> + Send + Sync;
+type SetParametersFn = dyn FnMut(&CompiledLayout) -> Result<(), BoxError>;
 
 /// A renderer's connection to the manager, built from callbacks.
 pub struct RenderingServer {
     tile_size: Box<dyn FnMut() -> u32>,
     scene_info: Box<dyn FnMut() -> SceneInfo>,
-    set_parameters: Box<dyn FnMut(&CompiledLayout) -> Result<(), BoxError>>,
+    set_parameters: Box<SetParametersFn>,
     evaluate: Arc<EvaluateFn>,
     finish: Box<dyn FnMut()>,
 }

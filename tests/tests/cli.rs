@@ -1,0 +1,111 @@
+//! `fbksd run` as a user types it.
+
+use fbksd_tests::{analytic_scene, bin};
+use std::process::Command;
+
+#[test]
+fn fbksd_run_writes_results_and_prints_a_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = analytic_scene(dir.path(), "small", 16, 8);
+    let b = analytic_scene(dir.path(), "wide", 40, 4);
+    let results = dir.path().join("out");
+    let output = Command::new(bin("fbksd"))
+        .args([
+            "run",
+            "--technique",
+            &bin("box-filter"),
+            "--renderer",
+            &bin("fbksd-analytic-renderer"),
+        ])
+        .args([
+            "--scene",
+            a.to_str().unwrap(),
+            "--scene",
+            b.to_str().unwrap(),
+            "--spp",
+            "1,8",
+        ])
+        .args(["--results", results.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr),
+    );
+    assert!(output.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.lines().next().unwrap().starts_with("scene  "),
+        "{stdout}"
+    );
+    assert_eq!(
+        stdout
+            .lines()
+            .filter(|l| l.contains("box-filter") && l.contains(" ok "))
+            .count(),
+        4,
+        "{stdout}"
+    );
+    assert!(stderr.contains("▶ small · box-filter · 8 spp"), "{stderr}");
+    for scene in ["small", "wide"] {
+        for spp in [1, 8] {
+            assert!(results
+                .join(format!("box-filter/{scene}/{spp}_0.exr"))
+                .is_file());
+            assert!(results
+                .join(format!("box-filter/{scene}/{spp}_0_log.json"))
+                .is_file());
+        }
+    }
+}
+
+#[test]
+fn fbksd_run_names_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        let o = Command::new(bin("fbksd"))
+            .arg("run")
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (code, err) = run(&["-t", "x", "-r", "y", "-s", "nowhere.json"]);
+    assert_ne!(code, Some(0));
+    assert!(
+        err.contains("scene file nowhere.json does not exist"),
+        "{err}"
+    );
+    let scene = analytic_scene(dir.path(), "s", 4, 4);
+    let (code, err) = run(&[
+        "-t",
+        "x",
+        "-r",
+        "y",
+        "-s",
+        scene.to_str().unwrap(),
+        "--spp",
+        "0",
+    ]);
+    assert_ne!(code, Some(0));
+    assert!(err.contains("--spp takes positive budgets"), "{err}");
+    // A technique that cannot start: the run is recorded and the exit code says so.
+    let (code, err) = run(&[
+        "-t",
+        "/no/such/technique",
+        "-r",
+        &bin("fbksd-analytic-renderer"),
+        "-s",
+        scene.to_str().unwrap(),
+        "--spp",
+        "1",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("launch_failed") && err.contains("/no/such/technique"),
+        "{err}"
+    );
+}
