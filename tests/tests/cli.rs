@@ -109,3 +109,54 @@ fn fbksd_run_names_what_is_wrong() {
         "{err}"
     );
 }
+
+#[test]
+fn killing_fbksd_run_takes_its_technique_and_renderer_along() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = analytic_scene(dir.path(), "s", 8, 8);
+    // A unique argument lets pgrep find exactly this test's technique.
+    let marker = format!("marker-{}", std::process::id());
+    let technique = format!("{} hang {marker}", bin("fbksd-test-technique"));
+    let mut fbksd = Command::new(bin("fbksd"))
+        .args([
+            "run",
+            "-t",
+            &technique,
+            "-r",
+            &bin("fbksd-analytic-renderer"),
+            "-s",
+            scene.to_str().unwrap(),
+        ])
+        .args([
+            "--spp",
+            "1",
+            "--time-limit",
+            "60s",
+            "--results",
+            dir.path().join("r").to_str().unwrap(),
+        ])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let running = || {
+        Command::new("pgrep")
+            .args(["-f", &marker])
+            .output()
+            .unwrap()
+            .status
+            .success()
+    };
+    let until = |want: bool| {
+        for _ in 0..100 {
+            if running() == want {
+                return true;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        false
+    };
+    assert!(until(true), "the technique never started");
+    fbksd.kill().unwrap();
+    fbksd.wait().unwrap();
+    assert!(until(false), "the technique outlived its manager");
+}

@@ -1,6 +1,11 @@
 //! Child processes under supervision: each in its own process group (so a
-//! kill reaches everything it started), reaped with `wait4` so that its CPU
-//! time and peak memory are measured by the kernel, not reported by itself.
+//! kill reaches everything it started), killed if the manager dies, and
+//! reaped with `wait4` so that its CPU time and peak memory are measured by
+//! the kernel, not reported by itself.
+//!
+//! Note: the parent-death signal fires when the *thread* that started the
+//! child exits, so children are started from threads that outlive them
+//! (the caller of `SceneRunner::run`).
 
 use std::fs::File;
 use std::io;
@@ -78,6 +83,17 @@ impl Supervised {
             .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "empty command"))?;
         let mut command = Command::new(program);
         command.args(args).stdin(Stdio::null()).process_group(0);
+        // Its own process group keeps a terminal's Ctrl-C from reaching it, so
+        // tie its life to the manager's instead: killed if the manager dies.
+        // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+        unsafe {
+            command.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                    return Err(io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
         if let Some(log) = log {
             let log_file = File::options().create(true).append(true).open(log)?;
             command.stdout(log_file.try_clone()?).stderr(log_file);
