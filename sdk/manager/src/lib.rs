@@ -30,6 +30,7 @@ pub mod process;
 pub mod record;
 pub mod results;
 pub mod scene;
+pub mod scenes;
 
 pub use benchmark::{Benchmark, Progress, SceneSpec, TechniqueSpec};
 pub use record::{RunRecord, RunStatus, Times};

@@ -204,6 +204,41 @@ pub fn write_exr(path: &Path, width: u32, height: u32, rgb: &[f32]) -> io::Resul
         .map_err(|e| io::Error::other(format!("{}: {e}", path.display())))
 }
 
+/// The sRGB transfer function of a linear value, clamped to [0, 1]; NaN
+/// becomes 0.
+pub fn srgb(linear: f32) -> f32 {
+    let v = if linear.is_nan() {
+        0.0
+    } else {
+        linear.clamp(0.0, 1.0)
+    };
+    if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Writes an 8-bit sRGB PNG preview of a linear RGB float image
+/// (`exposure` in stops is applied first).
+pub fn write_png_preview(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[f32],
+    exposure: f32,
+) -> io::Result<()> {
+    let scale = 2f32.powf(exposure);
+    let bytes: Vec<u8> = rgb
+        .iter()
+        .map(|v| (srgb(v * scale) * 255.0 + 0.5) as u8)
+        .collect();
+    image::RgbImage::from_raw(width, height, bytes)
+        .ok_or_else(|| io::Error::other("image size mismatch"))?
+        .save(path)
+        .map_err(|e| io::Error::other(format!("{}: {e}", path.display())))
+}
+
 /// Reads the first RGB(A) layer of an OpenEXR file as 32-bit floats
 /// (whatever the file's sample type): `(width, height, rgb)`.
 pub fn read_exr(path: &Path) -> io::Result<(u32, u32, Vec<f32>)> {

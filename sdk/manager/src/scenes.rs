@@ -1,0 +1,124 @@
+//! The scene pool's metadata: one `fbksd-scene.json` per scene directory.
+//!
+//! ```json
+//! {"name": "sphere", "path": "sphere.expr", "ref-img": "reference.exr",
+//!  "renderer": "procedural", "category": "experimental", "tags": ["motion-blur"],
+//!  "spp": [1, 4, 16, 64], "width": 500, "height": 500,
+//!  "reference": {"method": "closed_form", "formula": "sphere_time"},
+//!  "description": "…"}
+//! ```
+//!
+//! `name`, `path` and `ref-img` are the original FBKSD's keys; the rest is
+//! new: the renderer that loads the scene, what it stresses (tags), its
+//! default budgets and resolution, and how its reference is made.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// A metadata problem, with the file it is in.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}: {message}")]
+pub struct MetaError {
+    /// The metadata file.
+    pub file: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// How a reference is made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ReferenceMethod {
+    /// Render at `spp` samples per pixel.
+    Render {
+        /// Samples per pixel.
+        spp: u64,
+    },
+    /// A closed form known by name.
+    ClosedForm {
+        /// `sphere_time` or `fireflies`.
+        formula: String,
+    },
+}
+
+/// A scene's `fbksd-scene.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneMeta {
+    /// Scene name.
+    pub name: String,
+    /// Scene file, relative to the directory.
+    pub path: String,
+    /// Reference image, relative to the directory.
+    #[serde(rename = "ref-img")]
+    pub ref_img: String,
+    /// Renderer name (`procedural`, `embree`, `analytic`).
+    pub renderer: String,
+    /// `experimental` or `production`.
+    pub category: String,
+    /// What the scene stresses.
+    pub tags: Vec<String>,
+    /// Default budgets.
+    pub spp: Vec<u64>,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// How the reference is made.
+    pub reference: ReferenceMethod,
+    /// What the scene is.
+    pub description: String,
+    /// The directory (not in the file).
+    #[serde(skip)]
+    pub dir: PathBuf,
+}
+
+/// The metadata file's name.
+pub const META_FILE: &str = "fbksd-scene.json";
+
+impl SceneMeta {
+    /// Reads a scene directory's metadata (or the file itself) and checks it
+    /// against the scene file.
+    pub fn load(path: &Path) -> Result<SceneMeta, MetaError> {
+        let file = if path.is_dir() {
+            path.join(META_FILE)
+        } else {
+            path.to_path_buf()
+        };
+        let fail = |message: String| MetaError {
+            file: file.display().to_string(),
+            message,
+        };
+        let text = std::fs::read_to_string(&file).map_err(|e| fail(e.to_string()))?;
+        let mut meta: SceneMeta = serde_json::from_str(&text).map_err(|e| fail(e.to_string()))?;
+        meta.dir = file.parent().unwrap_or(Path::new(".")).to_path_buf();
+        if meta.spp.is_empty() || meta.spp.contains(&0) {
+            return Err(fail("spp must list positive budgets".into()));
+        }
+        if !["experimental", "production"].contains(&meta.category.as_str()) {
+            return Err(fail(format!(
+                "category must be experimental or production, not {:?}",
+                meta.category
+            )));
+        }
+        if meta.width == 0 || meta.height == 0 {
+            return Err(fail("width and height must be positive".into()));
+        }
+        Ok(meta)
+    }
+
+    /// Whether `path` is a scene directory or a metadata file.
+    pub fn is_meta(path: &Path) -> bool {
+        path.join(META_FILE).is_file() || path.file_name().is_some_and(|n| n == META_FILE)
+    }
+
+    /// The scene file.
+    pub fn scene_file(&self) -> PathBuf {
+        self.dir.join(&self.path)
+    }
+
+    /// The reference image.
+    pub fn reference_file(&self) -> PathBuf {
+        self.dir.join(&self.ref_img)
+    }
+}
