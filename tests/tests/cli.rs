@@ -75,11 +75,14 @@ fn fbksd_run_names_what_is_wrong() {
     };
     let (code, err) = run(&["-t", "x", "-r", "y", "-s", "nowhere.json"]);
     assert_ne!(code, Some(0));
+    assert!(err.contains("scene nowhere.json does not exist"), "{err}");
+    let scene = analytic_scene(dir.path(), "s", 4, 4);
+    let (code, err) = run(&["-t", "x", "-s", scene.to_str().unwrap()]);
+    assert_ne!(code, Some(0));
     assert!(
-        err.contains("scene file nowhere.json does not exist"),
+        err.contains("has no metadata: say which renderer loads it with --renderer"),
         "{err}"
     );
-    let scene = analytic_scene(dir.path(), "s", 4, 4);
     let (code, err) = run(&[
         "-t",
         "x",
@@ -159,4 +162,68 @@ fn killing_fbksd_run_takes_its_technique_and_renderer_along() {
     fbksd.kill().unwrap();
     fbksd.wait().unwrap();
     assert!(until(false), "the technique outlived its manager");
+}
+
+#[test]
+fn a_scene_directory_brings_its_renderer_and_budgets() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_dir = dir.path().join("tiny");
+    std::fs::create_dir(&scene_dir).unwrap();
+    analytic_scene(&scene_dir, "tiny", 6, 5);
+    std::fs::write(
+        scene_dir.join("fbksd-scene.json"),
+        r#"{"name": "tiny", "path": "tiny.json", "ref-img": "reference.exr", "renderer": "analytic",
+            "category": "experimental", "tags": [], "spp": [2, 3], "width": 6, "height": 5,
+            "reference": {"method": "render", "spp": 64}, "description": "test"}"#,
+    )
+    .unwrap();
+    let results = dir.path().join("out");
+    let output = Command::new(bin("fbksd"))
+        .args([
+            "run",
+            "-t",
+            &bin("box-filter"),
+            "-s",
+            scene_dir.to_str().unwrap(),
+            "--results",
+            results.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        results.join("box-filter/tiny/2_0.exr").is_file()
+            && results.join("box-filter/tiny/3_0.exr").is_file()
+    );
+    // The procedural scenes of the pool run the same way.
+    let sphere = format!(
+        "{}/../scenes/experimental/sphere",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let output = Command::new(bin("fbksd"))
+        .args([
+            "run",
+            "-t",
+            &bin("box-filter"),
+            "-s",
+            &sphere,
+            "--spp",
+            "1",
+            "--results",
+            results.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let (w, h, _) =
+        fbksd_manager::results::read_exr(&results.join("box-filter/sphere/1_0.exr")).unwrap();
+    assert_eq!((w, h), (500, 500));
 }

@@ -37,8 +37,8 @@ fn bench(
         scenes: vec![SceneSpec {
             name: "analytic".into(),
             renderer_argv: renderer_argv(&scene, flags),
+            spps: spps.to_vec(),
         }],
-        spps: spps.to_vec(),
         results: dir.join("results"),
         limits: limits(limit_s),
     }

@@ -933,6 +933,22 @@ impl<'p> Machine<'p> {
         &self.slots[slot]
     }
 
+    /// Loads the random parameters of `params.len()` (≤ [`LANES`]) samples
+    /// into the first lanes and runs the program on them.
+    pub fn run_samples(&mut self, params: &[[f64; 7]]) -> Result<(), RuntimeError> {
+        let n = params.len();
+        debug_assert!(n <= LANES);
+        for (d, slot) in self.program.parameters.iter().enumerate() {
+            if let Some(slot) = slot {
+                let lanes = &mut self.slots[*slot];
+                for (lane, p) in params.iter().enumerate() {
+                    lanes[lane] = p[d];
+                }
+            }
+        }
+        self.run(if n == LANES { ALL } else { (1u64 << n) - 1 })
+    }
+
     /// Runs the program on the lanes in `mask`.
     pub fn run(&mut self, mask: Mask) -> Result<(), RuntimeError> {
         for (_, _, s) in &self.program.features {

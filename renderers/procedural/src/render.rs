@@ -10,7 +10,7 @@
 //! of the sample index so dimensions are not correlated. Free samples (count requests) are
 //! uniform over the image.
 
-use crate::program::{Machine, Program, ALL, LANES};
+use crate::program::{Machine, Program, LANES};
 use crate::scene::Scene;
 use fbksd_core::layout::{Element, ElementIo};
 use fbksd_core::{CompiledLayout, Feature, RandomParameter, Tile};
@@ -184,8 +184,6 @@ impl Sampler {
 /// Where each layout element comes from, resolved once per session.
 #[derive(Debug, Clone)]
 pub struct Bindings {
-    /// Program slot of each random parameter the program reads.
-    parameters: [Option<usize>; 7],
     /// Per layout element: what to write (None: INPUT, leave alone).
     outputs: Vec<Option<Source>>,
     /// Per random parameter: the layout offset of an INPUT value.
@@ -222,17 +220,14 @@ impl Bindings {
                 ),
             })
             .collect();
-        let mut parameters = [None; 7];
         let mut needed = 0u8;
         for p in RandomParameter::ALL {
-            parameters[p.index()] = program.parameter_slot(*p);
             let output = layout.parameter_offset(*p).is_some() && !layout.is_input(*p);
-            if (parameters[p.index()].is_some() || output) && inputs[p.index()].is_none() {
+            if (program.uses(*p) || output) && inputs[p.index()].is_none() {
                 needed |= 1 << p.index();
             }
         }
         Bindings {
-            parameters,
             outputs,
             inputs,
             needed,
@@ -312,17 +307,8 @@ fn fill(
             }
             params[lane] = p;
         }
-        for (d, slot) in bindings.parameters.iter().enumerate() {
-            if let Some(slot) = slot {
-                let lanes = machine.slot_mut(*slot);
-                for lane in 0..n {
-                    lanes[lane] = params[lane][d];
-                }
-            }
-        }
-        let mask = if n == LANES { ALL } else { (1u64 << n) - 1 };
         machine
-            .run(mask)
+            .run_samples(&params[..n])
             .map_err(|e| scene.runtime_error(e.pos, &e.message))?;
         for (i, source) in bindings.outputs.iter().enumerate() {
             let Some(source) = source else { continue };
@@ -427,15 +413,10 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
         .map(|(f, n)| program.feature_slot(*f, *n))
         .collect();
     let sampler = Sampler::new(scene.width, scene.height, request);
-    let parameter_slots: Vec<Option<usize>> = RandomParameter::ALL
+    let needed = RandomParameter::ALL
         .iter()
-        .map(|p| program.parameter_slot(*p))
-        .collect();
-    let needed =
-        parameter_slots
-            .iter()
-            .enumerate()
-            .fold(0u8, |m, (d, s)| if s.is_some() { m | 1 << d } else { m });
+        .filter(|p| program.uses(**p))
+        .fold(0u8, |m, p| m | 1 << p.index());
     let (w, h) = (scene.width as usize, scene.height as usize);
     let mut image = vec![0f32; w * h * 3];
     image.par_chunks_mut(w * 3).enumerate().try_for_each_init(
@@ -461,16 +442,8 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
                     *column = x as usize * 3;
                     s += 1;
                 }
-                for (d, slot) in parameter_slots.iter().enumerate() {
-                    let Some(slot) = slot else { continue };
-                    let lanes = machine.slot_mut(*slot);
-                    for lane in 0..n {
-                        lanes[lane] = params[lane][d];
-                    }
-                }
-                let mask = if n == LANES { ALL } else { (1u64 << n) - 1 };
                 machine
-                    .run(mask)
+                    .run_samples(&params[..n])
                     .map_err(|e| scene.runtime_error(e.pos, &e.message))?;
                 for (c, slot) in slots.iter().enumerate() {
                     let Some(slot) = slot else { continue };

@@ -2,6 +2,7 @@
 
 use anyhow::{bail, Context};
 use clap::Args;
+use fbksd_manager::scenes::SceneMeta;
 use fbksd_manager::{Benchmark, Limits, Progress, RunRecord, RunStatus, SceneSpec, TechniqueSpec};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -12,14 +13,17 @@ pub struct RunArgs {
     /// A technique: `[NAME=]COMMAND` (the name defaults to the program's file name). Repeatable.
     #[arg(long = "technique", short = 't', required = true)]
     techniques: Vec<String>,
-    /// The renderer command; each scene file is appended to it.
+    /// The renderer command for plain scene files (the file is appended to
+    /// it); scene directories name their renderer in fbksd-scene.json.
     #[arg(long, short = 'r')]
-    renderer: String,
-    /// A scene file (its name is the file stem). Repeatable.
+    renderer: Option<String>,
+    /// A scene: a directory with fbksd-scene.json (or that file), or a plain
+    /// scene file for --renderer (named by its file stem). Repeatable.
     #[arg(long = "scene", short = 's', required = true)]
     scenes: Vec<PathBuf>,
-    /// Budgets in samples per pixel, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "1,4,16")]
+    /// Budgets in samples per pixel, comma-separated [default: each scene's
+    /// own budgets, or 1,4,16 for plain scene files].
+    #[arg(long, value_delimiter = ',')]
     spp: Vec<u64>,
     /// Where results go.
     #[arg(long, default_value = "fbksd-results")]
@@ -59,28 +63,63 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .iter()
         .map(|t| technique_spec(t))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let renderer = shell_words::split(&args.renderer)
-        .with_context(|| format!("--renderer {:?}", args.renderer))?;
-    if renderer.is_empty() {
-        bail!("--renderer is empty");
+    if args.spp.contains(&0) {
+        bail!("--spp takes positive budgets, e.g. --spp 1,4,16");
     }
+    let renderer = match &args.renderer {
+        Some(r) => {
+            let argv = shell_words::split(r).with_context(|| format!("--renderer {r:?}"))?;
+            if argv.is_empty() {
+                bail!("--renderer is empty");
+            }
+            Some(argv)
+        }
+        None => None,
+    };
     let mut scenes = Vec::new();
     for path in &args.scenes {
-        if !path.is_file() {
-            bail!("scene file {} does not exist", path.display());
+        if SceneMeta::is_meta(path) {
+            let meta = SceneMeta::load(path)?;
+            let program = renderer_program(&meta.renderer)?;
+            let file = std::fs::canonicalize(meta.scene_file())
+                .with_context(|| format!("scene {}: {}", meta.name, meta.scene_file().display()))?;
+            let renderer_argv = vec![program, file.to_string_lossy().into_owned()];
+            let spps = if args.spp.is_empty() {
+                meta.spp.clone()
+            } else {
+                args.spp.clone()
+            };
+            scenes.push(SceneSpec {
+                name: meta.name,
+                renderer_argv,
+                spps,
+            });
+            continue;
         }
+        if !path.is_file() {
+            bail!("scene {} does not exist (give a scene directory, its fbksd-scene.json, or a scene file)", path.display());
+        }
+        let Some(renderer) = &renderer else {
+            bail!(
+                "scene file {} has no metadata: say which renderer loads it with --renderer",
+                path.display()
+            );
+        };
         let mut renderer_argv = renderer.clone();
         renderer_argv.push(std::fs::canonicalize(path)?.to_string_lossy().into_owned());
         let name = path
             .file_stem()
             .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+        let spps = if args.spp.is_empty() {
+            vec![1, 4, 16]
+        } else {
+            args.spp.clone()
+        };
         scenes.push(SceneSpec {
             name,
             renderer_argv,
+            spps,
         });
-    }
-    if args.spp.is_empty() || args.spp.contains(&0) {
-        bail!("--spp takes positive budgets, e.g. --spp 1,4,16");
     }
     let limits = Limits {
         time_limit: (!args.time_limit.is_zero()).then_some(args.time_limit),
@@ -89,7 +128,6 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let benchmark = Benchmark {
         techniques,
         scenes,
-        spps: args.spp,
         results: args.results.clone(),
         limits,
     };
@@ -101,6 +139,31 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         std::process::exit(2);
     }
     Ok(())
+}
+
+/// The program of a renderer named in scene metadata: `fbksd-<name>` (or
+/// `fbksd-<name>-renderer`) next to this program, else on PATH.
+fn renderer_program(name: &str) -> anyhow::Result<String> {
+    let candidates = [format!("fbksd-{name}"), format!("fbksd-{name}-renderer")];
+    let here = std::env::current_exe()?;
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    let dirs = here
+        .parent()
+        .map(PathBuf::from)
+        .into_iter()
+        .chain(std::env::split_paths(&path));
+    for dir in dirs {
+        for c in &candidates {
+            let p = dir.join(c);
+            if p.is_file() {
+                return Ok(p.to_string_lossy().into_owned());
+            }
+        }
+    }
+    bail!(
+        "no program for renderer {name:?}: looked for {} next to fbksd and on PATH",
+        candidates.join(" and ")
+    )
 }
 
 fn report(progress: Progress<'_>, live: bool) {

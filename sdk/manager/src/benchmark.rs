@@ -1,4 +1,4 @@
-//! A benchmark: every technique on every scene at every budget.
+//! A benchmark: every technique on every scene at each of its budgets.
 //!
 //! The renderer of a scene starts once and serves every run on that scene
 //! (it is restarted only after a run left it broken or mid-request); the
@@ -26,6 +26,8 @@ pub struct SceneSpec {
     pub name: String,
     /// The renderer command, scene file included (normally last).
     pub renderer_argv: Vec<String>,
+    /// Budgets in samples per pixel for this scene.
+    pub spps: Vec<u64>,
 }
 
 /// What the benchmark reports while it works.
@@ -56,10 +58,8 @@ pub enum Progress<'a> {
 pub struct Benchmark {
     /// Techniques.
     pub techniques: Vec<TechniqueSpec>,
-    /// Scenes.
+    /// Scenes, each with its budgets.
     pub scenes: Vec<SceneSpec>,
-    /// Budgets in samples per pixel.
-    pub spps: Vec<u64>,
     /// Where results go.
     pub results: PathBuf,
     /// Limits of every run.
@@ -82,7 +82,7 @@ impl Benchmark {
             for technique in &self.techniques {
                 let technique_name = path_safe_name(&technique.name);
                 let dir = results.run_dir(&technique_name, &scene_name)?;
-                for &spp in &self.spps {
+                for &spp in &scene.spps {
                     progress(Progress::RunStarted {
                         scene: &scene_name,
                         technique: &technique_name,

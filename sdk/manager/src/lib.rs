@@ -16,8 +16,11 @@
 //! use fbksd_manager::{Benchmark, TechniqueSpec, SceneSpec, Limits};
 //! let bench = Benchmark {
 //!     techniques: vec![TechniqueSpec { name: "box".into(), argv: vec!["./box-filter".into()] }],
-//!     scenes: vec![SceneSpec { name: "gradient".into(), renderer_argv: vec!["fbksd-analytic-renderer".into(), "gradient".into()] }],
-//!     spps: vec![1, 4, 16],
+//!     scenes: vec![SceneSpec {
+//!         name: "gradient".into(),
+//!         renderer_argv: vec!["fbksd-analytic-renderer".into(), "gradient.json".into()],
+//!         spps: vec![1, 4, 16],
+//!     }],
 //!     results: "results".into(),
 //!     limits: Limits::default(),
 //! };
