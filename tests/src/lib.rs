@@ -12,33 +12,21 @@ pub fn bin_dir() -> PathBuf {
     // Test executables live in target/<profile>/deps.
     let exe = std::env::current_exe().expect("current_exe");
     let deps = exe.parent().expect("exe has a parent");
-    let dir = if deps.ends_with("deps") {
-        deps.parent().unwrap()
-    } else {
-        deps
-    };
+    let dir = if deps.ends_with("deps") { deps.parent().unwrap() } else { deps };
     dir.to_path_buf()
 }
 
 /// Path of a workspace binary; panics with the command that builds it.
 pub fn bin(name: &str) -> String {
     let path = bin_dir().join(name);
-    assert!(
-        path.is_file(),
-        "{} is missing: run `cargo build --workspace --bins` first",
-        path.display()
-    );
+    assert!(path.is_file(), "{} is missing: run `cargo build --workspace --bins` first", path.display());
     path.to_string_lossy().into_owned()
 }
 
 /// Writes an analytic scene file and returns its path.
 pub fn analytic_scene(dir: &Path, name: &str, width: u32, height: u32) -> PathBuf {
     let path = dir.join(format!("{name}.json"));
-    std::fs::write(
-        &path,
-        format!(r#"{{"width": {width}, "height": {height}}}"#),
-    )
-    .unwrap();
+    std::fs::write(&path, format!(r#"{{"width": {width}, "height": {height}}}"#)).unwrap();
     path
 }
 

@@ -10,50 +10,20 @@ fn fbksd_run_writes_results_and_prints_a_summary() {
     let b = analytic_scene(dir.path(), "wide", 40, 4);
     let results = dir.path().join("out");
     let output = Command::new(bin("fbksd"))
-        .args([
-            "run",
-            "--technique",
-            &bin("box-filter"),
-            "--renderer",
-            &bin("fbksd-analytic-renderer"),
-        ])
-        .args([
-            "--scene",
-            a.to_str().unwrap(),
-            "--scene",
-            b.to_str().unwrap(),
-            "--spp",
-            "1,8",
-        ])
+        .args(["run", "--technique", &bin("box-filter"), "--renderer", &bin("fbksd-analytic-renderer")])
+        .args(["--scene", a.to_str().unwrap(), "--scene", b.to_str().unwrap(), "--spp", "1,8"])
         .args(["--results", results.to_str().unwrap()])
         .output()
         .unwrap();
-    let (stdout, stderr) = (
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr),
-    );
+    let (stdout, stderr) = (String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
     assert!(output.status.success(), "{stdout}\n{stderr}");
-    assert!(
-        stdout.lines().next().unwrap().starts_with("scene  "),
-        "{stdout}"
-    );
-    assert_eq!(
-        stdout
-            .lines()
-            .filter(|l| l.contains("box-filter") && l.contains(" ok "))
-            .count(),
-        4,
-        "{stdout}"
-    );
+    assert!(stdout.lines().next().unwrap().starts_with("scene  "), "{stdout}");
+    assert_eq!(stdout.lines().filter(|l| l.contains("box-filter") && l.contains(" ok ")).count(), 4, "{stdout}");
     assert!(stderr.contains("▶ small · box-filter · 8 spp"), "{stderr}");
     for scene in ["small", "wide"] {
         for spp in [1, 8] {
-            assert!(results
-                .join(format!("box-filter/{scene}/{spp}_0.exr"))
-                .is_file());
-            assert!(results
-                .join(format!("box-filter/{scene}/{spp}_0_log.json"))
-                .is_file());
+            assert!(results.join(format!("box-filter/{scene}/{spp}_0.exr")).is_file());
+            assert!(results.join(format!("box-filter/{scene}/{spp}_0_log.json")).is_file());
         }
     }
 }
@@ -62,16 +32,8 @@ fn fbksd_run_writes_results_and_prints_a_summary() {
 fn fbksd_run_names_what_is_wrong() {
     let dir = tempfile::tempdir().unwrap();
     let run = |args: &[&str]| {
-        let o = Command::new(bin("fbksd"))
-            .arg("run")
-            .args(args)
-            .current_dir(dir.path())
-            .output()
-            .unwrap();
-        (
-            o.status.code(),
-            String::from_utf8_lossy(&o.stderr).into_owned(),
-        )
+        let o = Command::new(bin("fbksd")).arg("run").args(args).current_dir(dir.path()).output().unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
     };
     let (code, err) = run(&["-t", "x", "-r", "y", "-s", "nowhere.json"]);
     assert_ne!(code, Some(0));
@@ -79,20 +41,8 @@ fn fbksd_run_names_what_is_wrong() {
     let scene = analytic_scene(dir.path(), "s", 4, 4);
     let (code, err) = run(&["-t", "x", "-s", scene.to_str().unwrap()]);
     assert_ne!(code, Some(0));
-    assert!(
-        err.contains("has no metadata: say which renderer loads it with --renderer"),
-        "{err}"
-    );
-    let (code, err) = run(&[
-        "-t",
-        "x",
-        "-r",
-        "y",
-        "-s",
-        scene.to_str().unwrap(),
-        "--spp",
-        "0",
-    ]);
+    assert!(err.contains("has no metadata: say which renderer loads it with --renderer"), "{err}");
+    let (code, err) = run(&["-t", "x", "-r", "y", "-s", scene.to_str().unwrap(), "--spp", "0"]);
     assert_ne!(code, Some(0));
     assert!(err.contains("--spp takes positive budgets"), "{err}");
     // A technique that cannot start: the run is recorded and the exit code says so.
@@ -107,10 +57,7 @@ fn fbksd_run_names_what_is_wrong() {
         "1",
     ]);
     assert_eq!(code, Some(2), "{err}");
-    assert!(
-        err.contains("launch_failed") && err.contains("/no/such/technique"),
-        "{err}"
-    );
+    assert!(err.contains("launch_failed") && err.contains("/no/such/technique"), "{err}");
 }
 
 #[test]
@@ -121,34 +68,12 @@ fn killing_fbksd_run_takes_its_technique_and_renderer_along() {
     let marker = format!("marker-{}", std::process::id());
     let technique = format!("{} hang {marker}", bin("fbksd-test-technique"));
     let mut fbksd = Command::new(bin("fbksd"))
-        .args([
-            "run",
-            "-t",
-            &technique,
-            "-r",
-            &bin("fbksd-analytic-renderer"),
-            "-s",
-            scene.to_str().unwrap(),
-        ])
-        .args([
-            "--spp",
-            "1",
-            "--time-limit",
-            "60s",
-            "--results",
-            dir.path().join("r").to_str().unwrap(),
-        ])
+        .args(["run", "-t", &technique, "-r", &bin("fbksd-analytic-renderer"), "-s", scene.to_str().unwrap()])
+        .args(["--spp", "1", "--time-limit", "60s", "--results", dir.path().join("r").to_str().unwrap()])
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    let running = || {
-        Command::new("pgrep")
-            .args(["-f", &marker])
-            .output()
-            .unwrap()
-            .status
-            .success()
-    };
+    let running = || Command::new("pgrep").args(["-f", &marker]).output().unwrap().status.success();
     let until = |want: bool| {
         for _ in 0..100 {
             if running() == want {
@@ -190,40 +115,15 @@ fn a_scene_directory_brings_its_renderer_and_budgets() {
         ])
         .output()
         .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    assert!(
-        results.join("box-filter/tiny/2_0.exr").is_file()
-            && results.join("box-filter/tiny/3_0.exr").is_file()
-    );
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(results.join("box-filter/tiny/2_0.exr").is_file() && results.join("box-filter/tiny/3_0.exr").is_file());
     // The procedural scenes of the pool run the same way.
-    let sphere = format!(
-        "{}/../scenes/experimental/sphere",
-        env!("CARGO_MANIFEST_DIR")
-    );
+    let sphere = format!("{}/../scenes/experimental/sphere", env!("CARGO_MANIFEST_DIR"));
     let output = Command::new(bin("fbksd"))
-        .args([
-            "run",
-            "-t",
-            &bin("box-filter"),
-            "-s",
-            &sphere,
-            "--spp",
-            "1",
-            "--results",
-            results.to_str().unwrap(),
-        ])
+        .args(["run", "-t", &bin("box-filter"), "-s", &sphere, "--spp", "1", "--results", results.to_str().unwrap()])
         .output()
         .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let (w, h, _) =
-        fbksd_manager::results::read_exr(&results.join("box-filter/sphere/1_0.exr")).unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let (w, h, _) = fbksd_manager::results::read_exr(&results.join("box-filter/sphere/1_0.exr")).unwrap();
     assert_eq!((w, h), (500, 500));
 }

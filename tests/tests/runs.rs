@@ -2,35 +2,21 @@
 //! techniques, each scenario a user could meet.
 
 use fbksd_manager::results::read_exr;
-use fbksd_manager::{
-    Benchmark, Limits, RunRecord, RunStatus, SceneRunner, SceneSpec, TechniqueLaunch, TechniqueSpec,
-};
+use fbksd_manager::{Benchmark, Limits, RunRecord, RunStatus, SceneRunner, SceneSpec, TechniqueLaunch, TechniqueSpec};
 use fbksd_tests::{analytic_scene, bin, renderer_argv};
 use std::path::Path;
 use std::time::Duration;
 
 fn technique(mode: &str) -> TechniqueSpec {
-    TechniqueSpec {
-        name: mode.into(),
-        argv: vec![bin("fbksd-test-technique"), mode.into()],
-    }
+    TechniqueSpec { name: mode.into(), argv: vec![bin("fbksd-test-technique"), mode.into()] }
 }
 
 fn limits(seconds: u64) -> Limits {
-    Limits {
-        time_limit: Some(Duration::from_secs(seconds)),
-        ..Limits::default()
-    }
+    Limits { time_limit: Some(Duration::from_secs(seconds)), ..Limits::default() }
 }
 
 /// Runs techniques on one analytic scene and returns the records.
-fn bench(
-    dir: &Path,
-    techniques: Vec<TechniqueSpec>,
-    spps: &[u64],
-    flags: &[&str],
-    limit_s: u64,
-) -> Vec<RunRecord> {
+fn bench(dir: &Path, techniques: Vec<TechniqueSpec>, spps: &[u64], flags: &[&str], limit_s: u64) -> Vec<RunRecord> {
     let scene = analytic_scene(dir, "analytic", 37, 23);
     Benchmark {
         techniques,
@@ -47,28 +33,14 @@ fn bench(
 }
 
 fn assert_status(r: &RunRecord, status: RunStatus, message_part: &str) {
-    assert_eq!(
-        r.status, status,
-        "{} at {} spp: {}",
-        r.technique, r.spp_budget, r.message
-    );
-    assert!(
-        r.message.contains(message_part),
-        "message {:?} lacks {message_part:?}",
-        r.message
-    );
+    assert_eq!(r.status, status, "{} at {} spp: {}", r.technique, r.spp_budget, r.message);
+    assert!(r.message.contains(message_part), "message {:?} lacks {message_part:?}", r.message);
 }
 
 #[test]
 fn every_layout_element_arrives_intact_and_the_result_is_saved() {
     let dir = tempfile::tempdir().unwrap();
-    let records = bench(
-        dir.path(),
-        vec![technique("all-elements")],
-        &[1, 5],
-        &[],
-        60,
-    );
+    let records = bench(dir.path(), vec![technique("all-elements")], &[1, 5], &[], 60);
     for r in &records {
         assert_status(r, RunStatus::Ok, "");
         assert_eq!(r.used_samples, r.samples_budget);
@@ -89,29 +61,14 @@ fn every_layout_element_arrives_intact_and_the_result_is_saved() {
         }
     }
     // Logs keep the original's fields, and the index lists both runs.
-    let log: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(
-            dir.path()
-                .join("results/all-elements/analytic/5_0_log.json"),
-        )
-        .unwrap(),
-    )
-    .unwrap();
-    for key in [
-        "date",
-        "spp_budget",
-        "samples_budget",
-        "used_samples",
-        "aborted",
-        "exec_time",
-        "status",
-        "times",
-    ] {
+    let log: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("results/all-elements/analytic/5_0_log.json")).unwrap())
+            .unwrap();
+    for key in ["date", "spp_budget", "samples_budget", "used_samples", "aborted", "exec_time", "status", "times"] {
         assert!(log.get(key).is_some(), "log lacks {key}");
     }
     let index: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("results/index.json")).unwrap())
-            .unwrap();
+        serde_json::from_slice(&std::fs::read(dir.path().join("results/index.json")).unwrap()).unwrap();
     assert_eq!(index["runs"].as_array().unwrap().len(), 2);
     assert_eq!(index["runs"][1]["image"], "all-elements/analytic/5_0.exr");
 }
@@ -129,24 +86,14 @@ fn budget_is_spent_exactly_across_requests_of_every_kind() {
 fn a_request_beyond_the_budget_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let records = bench(dir.path(), vec![technique("over-budget")], &[2], &[], 60);
-    assert_status(
-        &records[0],
-        RunStatus::OverBudget,
-        "requested 1 samples but only 0 of the budget of 1702",
-    );
+    assert_status(&records[0], RunStatus::OverBudget, "requested 1 samples but only 0 of the budget of 1702");
     assert!(records[0].aborted);
 }
 
 #[test]
 fn input_parameters_are_honoured_in_spp_and_count_requests() {
     let dir = tempfile::tempdir().unwrap();
-    let records = bench(
-        dir.path(),
-        vec![technique("input-spp"), technique("input-count")],
-        &[4],
-        &[],
-        60,
-    );
+    let records = bench(dir.path(), vec![technique("input-spp"), technique("input-count")], &[4], &[], 60);
     for r in &records {
         assert_status(r, RunStatus::Ok, "");
     }
@@ -155,43 +102,18 @@ fn input_parameters_are_honoured_in_spp_and_count_requests() {
 #[test]
 fn misbehaving_techniques_get_typed_statuses_and_the_benchmark_goes_on() {
     let dir = tempfile::tempdir().unwrap();
-    let techniques = [
-        "crash",
-        "hang",
-        "no-result",
-        "nan-result",
-        "wrong-size",
-        "duplicate-layout",
-        "all-elements",
-    ]
-    .into_iter()
-    .map(technique)
-    .collect();
+    let techniques = ["crash", "hang", "no-result", "nan-result", "wrong-size", "duplicate-layout", "all-elements"]
+        .into_iter()
+        .map(technique)
+        .collect();
     let records = bench(dir.path(), techniques, &[2], &[], 3);
     let by = |name: &str| records.iter().find(|r| r.technique == name).unwrap();
     assert_status(by("crash"), RunStatus::Crashed, "signal 6 (SIGABRT)");
     assert_status(by("hang"), RunStatus::Timeout, "time limit of 3s");
-    assert_status(
-        by("no-result"),
-        RunStatus::NoResult,
-        "without sending a result",
-    );
-    assert_status(
-        by("nan-result"),
-        RunStatus::InvalidOutput,
-        "1 NaN or infinite values (first at pixel x=1, y=0)",
-    );
-    assert!(
-        dir.path()
-            .join("results/nan-result/analytic/2_0.exr")
-            .is_file(),
-        "invalid image kept for inspection"
-    );
-    assert_status(
-        by("wrong-size"),
-        RunStatus::InvalidOutput,
-        "the result is 1×1×3 but the scene is 37×23×3",
-    );
+    assert_status(by("no-result"), RunStatus::NoResult, "without sending a result");
+    assert_status(by("nan-result"), RunStatus::InvalidOutput, "1 NaN or infinite values (first at pixel x=1, y=0)");
+    assert!(dir.path().join("results/nan-result/analytic/2_0.exr").is_file(), "invalid image kept for inspection");
+    assert_status(by("wrong-size"), RunStatus::InvalidOutput, "the result is 1×1×3 but the scene is 37×23×3");
     assert_status(
         by("duplicate-layout"),
         RunStatus::InvalidLayout,
@@ -206,68 +128,24 @@ fn misbehaving_techniques_get_typed_statuses_and_the_benchmark_goes_on() {
 #[test]
 fn a_crashing_renderer_fails_its_run_and_is_restarted_for_the_next() {
     let dir = tempfile::tempdir().unwrap();
-    let records = bench(
-        dir.path(),
-        vec![technique("all-elements")],
-        &[1, 2, 4],
-        &["--fault", "crash-at-spp=2"],
-        60,
-    );
+    let records = bench(dir.path(), vec![technique("all-elements")], &[1, 2, 4], &["--fault", "crash-at-spp=2"], 60);
     assert_status(&records[0], RunStatus::Ok, "");
-    assert_status(
-        &records[1],
-        RunStatus::RendererFailed,
-        "the renderer died (killed by signal 6 (SIGABRT))",
-    );
+    assert_status(&records[1], RunStatus::RendererFailed, "the renderer died (killed by signal 6 (SIGABRT))");
     assert_status(&records[2], RunStatus::Ok, "");
 }
 
 #[test]
 fn a_renderer_that_delivers_too_few_samples_or_none_is_blamed() {
     let dir = tempfile::tempdir().unwrap();
-    let short = bench(
-        dir.path(),
-        vec![technique("all-elements")],
-        &[1],
-        &["--fault", "short"],
-        60,
-    );
-    assert_status(
-        &short[0],
-        RunStatus::RendererFailed,
-        "finished a request with",
-    );
+    let short = bench(dir.path(), vec![technique("all-elements")], &[1], &["--fault", "short"], 60);
+    assert_status(&short[0], RunStatus::RendererFailed, "finished a request with");
     let dir = tempfile::tempdir().unwrap();
-    let hang = bench(
-        dir.path(),
-        vec![technique("all-elements")],
-        &[1],
-        &["--fault", "hang"],
-        2,
-    );
-    assert_status(
-        &hang[0],
-        RunStatus::RendererFailed,
-        "while the technique waited for the renderer",
-    );
+    let hang = bench(dir.path(), vec![technique("all-elements")], &[1], &["--fault", "hang"], 2);
+    assert_status(&hang[0], RunStatus::RendererFailed, "while the technique waited for the renderer");
     let dir = tempfile::tempdir().unwrap();
-    let dead = bench(
-        dir.path(),
-        vec![technique("all-elements")],
-        &[1, 2],
-        &["--fault", "exit-at-start"],
-        60,
-    );
-    assert_status(
-        &dead[0],
-        RunStatus::RendererFailed,
-        "exited (exit code 3) before it was ready",
-    );
-    assert!(
-        dead[1].message.contains("exiting at start as asked"),
-        "renderer log quoted: {}",
-        dead[1].message
-    );
+    let dead = bench(dir.path(), vec![technique("all-elements")], &[1, 2], &["--fault", "exit-at-start"], 60);
+    assert_status(&dead[0], RunStatus::RendererFailed, "exited (exit code 3) before it was ready");
+    assert!(dead[1].message.contains("exiting at start as asked"), "renderer log quoted: {}", dead[1].message);
 }
 
 #[test]
@@ -292,19 +170,13 @@ fn a_technique_started_by_hand_in_debug_mode_runs_and_writes_its_image() {
     let scene = analytic_scene(dir.path(), "debug", 20, 10);
     let out = dir.path().join("debug.exr");
     let output = std::process::Command::new(bin("box-filter"))
-        .args([
-            "--fbksd-renderer",
-            &shell_words::join(renderer_argv(&scene, &[])),
-        ])
+        .args(["--fbksd-renderer", &shell_words::join(renderer_argv(&scene, &[]))])
         .args(["--fbksd-spp", "3", "--fbksd-output", out.to_str().unwrap()])
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{stderr}");
-    assert!(
-        stderr.contains("fbksd debug: ok — 600 of 600 samples"),
-        "{stderr}"
-    );
+    assert!(stderr.contains("fbksd debug: ok — 600 of 600 samples"), "{stderr}");
     let (w, h, rgb) = read_exr(&out).unwrap();
     assert_eq!((w, h), (20, 10));
     assert!((rgb[3] - 1.5 / 20.0).abs() < 1e-6);
@@ -312,16 +184,10 @@ fn a_technique_started_by_hand_in_debug_mode_runs_and_writes_its_image() {
 
 #[test]
 fn a_technique_started_by_hand_without_a_manager_says_how_to_run_it() {
-    let output = std::process::Command::new(bin("box-filter"))
-        .env_remove("FBKSD_RENDEZVOUS")
-        .output()
-        .unwrap();
+    let output = std::process::Command::new(bin("box-filter")).env_remove("FBKSD_RENDEZVOUS").output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
-    assert!(
-        stderr.contains("fbksd run") && stderr.contains("--fbksd-renderer"),
-        "{stderr}"
-    );
+    assert!(stderr.contains("fbksd run") && stderr.contains("--fbksd-renderer"), "{stderr}");
 }
 
 #[test]
@@ -333,8 +199,7 @@ fn a_scene_runner_serves_an_external_technique() {
     let rendezvous = runner.dir().to_path_buf();
     let client = std::thread::spawn(move || {
         let mut c = fbksd_client::BenchmarkClient::connect_to(&rendezvous).unwrap();
-        c.set_sample_layout(&fbksd_client::SampleLayout::new().with("COLOR_R"))
-            .unwrap();
+        c.set_sample_layout(&fbksd_client::SampleLayout::new().with("COLOR_R")).unwrap();
         c.evaluate_samples(fbksd_client::Spp(2), |_| {}).unwrap();
         c.send_result().unwrap();
     });
@@ -342,8 +207,5 @@ fn a_scene_runner_serves_an_external_technique() {
     client.join().unwrap();
     assert_eq!(outcome.status, RunStatus::Ok, "{}", outcome.message);
     assert_eq!(outcome.used_samples, 128);
-    assert!(
-        runner.finish().is_some(),
-        "the renderer exits when told to finish"
-    );
+    assert!(runner.finish().is_some(), "the renderer exits when told to finish");
 }

@@ -58,13 +58,9 @@ impl Scene {
     /// Reads a scene file.
     pub fn load(path: &Path) -> Result<Scene, String> {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let scene: Scene =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let scene: Scene = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
         if scene.width == 0 || scene.height == 0 {
-            return Err(format!(
-                "{}: width and height must be positive",
-                path.display()
-            ));
+            return Err(format!("{}: width and height must be positive", path.display()));
         }
         Ok(scene)
     }
@@ -107,9 +103,7 @@ impl Fault {
                 .strip_prefix("crash-at-spp=")
                 .and_then(|n| n.parse().ok())
                 .map(Fault::CrashAtSpp)
-                .ok_or_else(|| {
-                    format!("unknown fault {s:?} (crash-at-spp=N, short, hang, exit-at-start)")
-                }),
+                .ok_or_else(|| format!("unknown fault {s:?} (crash-at-spp=N, short, hang, exit-at-start)")),
         }
     }
 }
@@ -147,12 +141,8 @@ pub fn draw(
             let u = uniform(stream, s, dim);
             let n = (spp as f64).sqrt().ceil().max(1.0) as u64;
             match p {
-                RandomParameter::ImageX => {
-                    x as f32 + (((s % n) as f32 + u) / n as f32).min(0.999_999_9)
-                }
-                RandomParameter::ImageY => {
-                    y as f32 + ((((s / n) % n) as f32 + u) / n as f32).min(0.999_999_9)
-                }
+                RandomParameter::ImageX => x as f32 + (((s % n) as f32 + u) / n as f32).min(0.999_999_9),
+                RandomParameter::ImageY => y as f32 + ((((s / n) % n) as f32 + u) / n as f32).min(0.999_999_9),
                 _ => u,
             }
         }
@@ -178,27 +168,14 @@ pub fn draw(
 ///   LIGHT_Y) + 10n; TEXTURE_COLOR[n] = COLOR · (n + 1).
 /// - each `_NS` feature = its number-0 feature + 100.
 /// - DIFFUSE_COLOR = COLOR · roughness threshold.
-pub fn features(
-    f: Feature,
-    number: u8,
-    params: &[f32; 7],
-    width: u32,
-    height: u32,
-    threshold: f32,
-) -> f32 {
+pub fn features(f: Feature, number: u8, params: &[f32; 7], width: u32, height: u32, threshold: f32) -> f32 {
     use Feature::*;
     let [ix, iy, lu, lv, t, lx, ly] = *params;
-    let color = [
-        (ix.floor() + 0.5) / width as f32,
-        (iy.floor() + 0.5) / height as f32,
-        t,
-    ];
+    let color = [(ix.floor() + 0.5) / width as f32, (iy.floor() + 0.5) / height as f32, t];
     let n = number as f32;
     match f {
         ColorR | ColorG | ColorB => color[f as usize - ColorR as usize],
-        DirectLightR | DirectLightG | DirectLightB => {
-            color[f as usize - DirectLightR as usize] / 2.0
-        }
+        DirectLightR | DirectLightG | DirectLightB => color[f as usize - DirectLightR as usize] / 2.0,
         Depth => 1.0 + lu,
         WorldX => ix + n,
         WorldY => iy + n,
@@ -206,21 +183,15 @@ pub fn features(
         NormalX => lv + 10.0 * n,
         NormalY => lx + 10.0 * n,
         NormalZ => ly + 10.0 * n,
-        TextureColorR | TextureColorG | TextureColorB => {
-            color[f as usize - TextureColorR as usize] * (n + 1.0)
-        }
+        TextureColorR | TextureColorG | TextureColorB => color[f as usize - TextureColorR as usize] * (n + 1.0),
         WorldXNs => ix + 100.0,
         WorldYNs => iy + 100.0,
         WorldZNs => t + 100.0,
         NormalXNs => lv + 100.0,
         NormalYNs => lx + 100.0,
         NormalZNs => ly + 100.0,
-        TextureColorRNs | TextureColorGNs | TextureColorBNs => {
-            color[f as usize - TextureColorRNs as usize] + 100.0
-        }
-        DiffuseColorR | DiffuseColorG | DiffuseColorB => {
-            color[f as usize - DiffuseColorR as usize] * threshold
-        }
+        TextureColorRNs | TextureColorGNs | TextureColorBNs => color[f as usize - TextureColorRNs as usize] + 100.0,
+        DiffuseColorR | DiffuseColorG | DiffuseColorB => color[f as usize - DiffuseColorR as usize] * threshold,
     }
 }
 
@@ -246,14 +217,9 @@ fn fill_sample(
         raw[i] = match element {
             Element::Parameter(p) if *io == ElementIo::Input => continue,
             Element::Parameter(p) => params[p.index()],
-            Element::Feature(f, n) => features(
-                *f,
-                *n,
-                &params,
-                scene.width,
-                scene.height,
-                layout.roughness_threshold(),
-            ),
+            Element::Feature(f, n) => {
+                features(*f, *n, &params, scene.width, scene.height, layout.roughness_threshold())
+            }
         };
     }
 }
@@ -292,52 +258,34 @@ pub fn evaluate(
             })
             .collect::<Vec<_>>()
     };
-    plan.par_iter()
-        .zip(free_offsets)
-        .try_for_each(|(tile, first)| {
-            let mut pipe = eval.pipe(*tile)?;
-            if scene.pattern == Pattern::Constant {
-                for chunk in pipe.raw().chunks_exact_mut(size) {
-                    chunk.copy_from_slice(&template);
-                }
-                return pipe.finish();
+    plan.par_iter().zip(free_offsets).try_for_each(|(tile, first)| {
+        let mut pipe = eval.pipe(*tile)?;
+        if scene.pattern == Pattern::Constant {
+            for chunk in pipe.raw().chunks_exact_mut(size) {
+                chunk.copy_from_slice(&template);
             }
-            match *tile {
-                Tile::Pixels { rect, spp } => {
-                    for y in rect.y0..rect.y1 {
-                        for x in rect.x0..rect.x1 {
-                            for s in 0..spp {
-                                let mut buffer = pipe.pixel_sample(x, y, s);
-                                fill_sample(
-                                    buffer.raw(),
-                                    layout,
-                                    scene,
-                                    Some((x, y)),
-                                    s as u64,
-                                    spp as u64,
-                                    eval.request,
-                                );
-                            }
+            return pipe.finish();
+        }
+        match *tile {
+            Tile::Pixels { rect, spp } => {
+                for y in rect.y0..rect.y1 {
+                    for x in rect.x0..rect.x1 {
+                        for s in 0..spp {
+                            let mut buffer = pipe.pixel_sample(x, y, s);
+                            fill_sample(buffer.raw(), layout, scene, Some((x, y)), s as u64, spp as u64, eval.request);
                         }
                     }
                 }
-                Tile::Samples { count } => {
-                    for i in 0..count {
-                        let mut buffer = pipe.sample(i);
-                        fill_sample(
-                            buffer.raw(),
-                            layout,
-                            scene,
-                            None,
-                            first + i,
-                            0,
-                            eval.request,
-                        );
-                    }
+            }
+            Tile::Samples { count } => {
+                for i in 0..count {
+                    let mut buffer = pipe.sample(i);
+                    fill_sample(buffer.raw(), layout, scene, None, first + i, 0, eval.request);
                 }
             }
-            pipe.finish()
-        })?;
+        }
+        pipe.finish()
+    })?;
     Ok(())
 }
 

@@ -10,7 +10,9 @@ fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
-            "--fault" => fault = Some(Fault::parse(&args.next().context("--fault needs a value")?).map_err(anyhow::Error::msg)?),
+            "--fault" => {
+                fault = Some(Fault::parse(&args.next().context("--fault needs a value")?).map_err(anyhow::Error::msg)?)
+            }
             _ if scene.is_none() => scene = Some(PathBuf::from(arg)),
             _ => bail!("unexpected argument {arg:?}; usage: fbksd-analytic-renderer [--fault F] <scene.json>"),
         }

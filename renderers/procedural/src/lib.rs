@@ -52,11 +52,7 @@ pub fn serve(scene: Scene) -> Result<(), fbksd_renderer::RendererError> {
             Ok(())
         })
         .on_evaluate_samples(move |eval| {
-            let program = for_eval
-                .lock()
-                .unwrap()
-                .clone()
-                .ok_or("evaluate before set_parameters")?;
+            let program = for_eval.lock().unwrap().clone().ok_or("evaluate before set_parameters")?;
             render::evaluate(&eval_scene, &program, eval).map_err(Into::into)
         })
         .run()

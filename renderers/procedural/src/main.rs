@@ -9,11 +9,7 @@ use std::path::{Path, PathBuf};
 
 /// The procedural renderer.
 #[derive(Parser)]
-#[command(
-    name = "fbksd-procedural",
-    version,
-    args_conflicts_with_subcommands = true
-)]
+#[command(name = "fbksd-procedural", version, args_conflicts_with_subcommands = true)]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
@@ -78,16 +74,9 @@ fn run() -> anyhow::Result<()> {
         }
         (Some(Command::Render { scene, spp, out }), _) => {
             let scene = load(&scene)?;
-            let image = fbksd_procedural::render::render_image(&scene, spp, 0)
-                .map_err(anyhow::Error::msg)?;
+            let image = fbksd_procedural::render::render_image(&scene, spp, 0).map_err(anyhow::Error::msg)?;
             if out.extension().is_some_and(|e| e == "png") {
-                fbksd_manager::results::write_png_preview(
-                    &out,
-                    scene.width,
-                    scene.height,
-                    &image,
-                    0.0,
-                )?;
+                fbksd_manager::results::write_png_preview(&out, scene.width, scene.height, &image, 0.0)?;
             } else {
                 fbksd_manager::results::write_exr(&out, scene.width, scene.height, &image)?;
             }
@@ -95,8 +84,8 @@ fn run() -> anyhow::Result<()> {
         (Some(Command::Reference { scenes, force, spp }), _) => {
             for dir in scenes {
                 let meta = reference::SceneMeta::load(&dir)?;
-                let note = reference::build(&meta, force, spp)
-                    .with_context(|| format!("reference of {}", meta.name))?;
+                let note =
+                    reference::build(&meta, force, spp).with_context(|| format!("reference of {}", meta.name))?;
                 println!("{}: {note}", meta.name);
             }
         }

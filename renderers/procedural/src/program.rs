@@ -119,9 +119,7 @@ const FUNCTIONS_1: &[(&str, Fn1)] = &[
 /// Every function name the language knows, for error messages.
 pub fn function_names() -> Vec<&'static str> {
     let mut names: Vec<&str> = FUNCTIONS_1.iter().map(|(n, _)| *n).collect();
-    names.extend([
-        "atan2", "pow", "hypot", "mod", "min", "max", "sum", "avg", "clamp", "inrange", "if",
-    ]);
+    names.extend(["atan2", "pow", "hypot", "mod", "min", "max", "sum", "avg", "clamp", "inrange", "if"]);
     names.sort_unstable();
     names
 }
@@ -145,32 +143,28 @@ enum Op {
         len: usize,
         index: CExpr,
     },
+    /// `keep`: the assignment's value is used by an enclosing expression,
+    /// so it is copied into the operation's own slot (a later assignment to
+    /// the same variable must not change it, as in `(x := 2) + (x := 3)`).
     Store {
         target: usize,
         value: CExpr,
+        keep: bool,
     },
     Scatter {
         base: usize,
         len: usize,
         index: CExpr,
         value: CExpr,
+        keep: bool,
     },
 }
 
 #[derive(Debug, Clone)]
 enum CStmt {
     Eval(CExpr),
-    If {
-        cond: CExpr,
-        then: Vec<CStmt>,
-        otherwise: Vec<CStmt>,
-    },
-    While {
-        cond: CExpr,
-        body: Vec<CStmt>,
-        step: Option<CExpr>,
-        pos: Pos,
-    },
+    If { cond: CExpr, then: Vec<CStmt>, otherwise: Vec<CStmt> },
+    While { cond: CExpr, body: Vec<CStmt>, step: Option<CExpr>, pos: Pos },
     Break,
     Continue,
 }
@@ -263,11 +257,7 @@ impl Compiler {
             _ => (name, 0u8),
         };
         if let Some(f) = Feature::from_name(base) {
-            if let Some(&(_, _, s)) = self
-                .features
-                .iter()
-                .find(|(g, n, _)| *g == f && *n == number)
-            {
+            if let Some(&(_, _, s)) = self.features.iter().find(|(g, n, _)| *g == f && *n == number) {
                 return Ok(Symbol::Feature(s));
             }
             let s = self.new_slot(1);
@@ -292,23 +282,16 @@ impl Compiler {
     }
 
     fn expr(&mut self, e: &Expr, depth: usize) -> Result<CExpr, SourceError> {
-        let op = |dst, op| {
-            Ok(CExpr::Op {
-                dst,
-                op: Box::new(op),
-            })
-        };
+        let op = |dst, op| Ok(CExpr::Op { dst, op: Box::new(op) });
         match e {
             Expr::Num(n) => Ok(CExpr::Slot(self.constant(*n))),
             Expr::Name(name, pos) => match self.lookup(name, *pos)? {
-                Symbol::Constant(s)
-                | Symbol::Parameter(_, s)
-                | Symbol::Feature(s)
-                | Symbol::Scalar(s) => Ok(CExpr::Slot(s)),
-                Symbol::Array(..) => Err(SourceError::new(
-                    *pos,
-                    format!("'{name}' is an array: index it, as in {name}[0]"),
-                )),
+                Symbol::Constant(s) | Symbol::Parameter(_, s) | Symbol::Feature(s) | Symbol::Scalar(s) => {
+                    Ok(CExpr::Slot(s))
+                }
+                Symbol::Array(..) => {
+                    Err(SourceError::new(*pos, format!("'{name}' is an array: index it, as in {name}[0]")))
+                }
             },
             Expr::Index(name, index, pos) => {
                 let Symbol::Array(base, len) = self.lookup(name, *pos)? else {
@@ -319,10 +302,7 @@ impl Compiler {
                     return if k >= 0.0 && (k as usize) < len {
                         Ok(CExpr::Slot(base + k as usize))
                     } else {
-                        Err(SourceError::new(
-                            *pos,
-                            format!("index {k} is outside '{name}' (size {len})"),
-                        ))
+                        Err(SourceError::new(*pos, format!("index {k} is outside '{name}' (size {len})")))
                     };
                 }
                 let index = self.expr(index, depth + 1)?;
@@ -340,8 +320,7 @@ impl Compiler {
                 op(dst, Op::Call1(Fn1::Not, a))
             }
             // Small constant powers as products: exact, branch-free, fast.
-            Expr::Binary(BinOp::Pow, l, r) if matches!(**r, Expr::Num(n) if n == 2.0 || n == 3.0 || n == 0.5) =>
-            {
+            Expr::Binary(BinOp::Pow, l, r) if matches!(**r, Expr::Num(n) if n == 2.0 || n == 3.0 || n == 0.5) => {
                 let Expr::Num(n) = **r else { unreachable!() };
                 let f = if n == 2.0 {
                     Fn1::Square
@@ -368,12 +347,7 @@ impl Compiler {
                 op(dst, Op::Select(c, a, b))
             }
             Expr::Call(name, args, pos) => self.call(name, args, *pos, depth),
-            Expr::Assign {
-                target,
-                op: aop,
-                value,
-                pos,
-            } => {
+            Expr::Assign { target, op: aop, value, pos } => {
                 // x op= v is x := x op v.
                 let value = match aop {
                     None => (**value).clone(),
@@ -384,31 +358,31 @@ impl Compiler {
                         let slot = match self.lookup(name, *npos)? {
                             Symbol::Scalar(s) | Symbol::Feature(s) => s,
                             Symbol::Parameter(p, _) => {
-                                return Err(SourceError::new(*pos, format!("{p} is a random parameter: it can be read, not assigned")))
+                                return Err(SourceError::new(
+                                    *pos,
+                                    format!("{p} is a random parameter: it can be read, not assigned"),
+                                ))
                             }
                             Symbol::Constant(_) => {
-                                return Err(SourceError::new(*pos, format!("'{name}' is a constant: it can be read, not assigned")))
+                                return Err(SourceError::new(
+                                    *pos,
+                                    format!("'{name}' is a constant: it can be read, not assigned"),
+                                ))
                             }
                             Symbol::Array(..) => {
-                                return Err(SourceError::new(*pos, format!("'{name}' is an array: assign its elements, as in {name}[0] := …")))
+                                return Err(SourceError::new(
+                                    *pos,
+                                    format!("'{name}' is an array: assign its elements, as in {name}[0] := …"),
+                                ))
                             }
                         };
                         let value = self.expr(&value, depth + 1)?;
                         let dst = self.temp(depth);
-                        op(
-                            dst,
-                            Op::Store {
-                                target: slot,
-                                value,
-                            },
-                        )
+                        op(dst, Op::Store { target: slot, value, keep: true })
                     }
                     Expr::Index(name, index, ipos) => {
                         let Symbol::Array(base, len) = self.lookup(name, *ipos)? else {
-                            return Err(SourceError::new(
-                                *ipos,
-                                format!("'{name}' is not an array"),
-                            ));
+                            return Err(SourceError::new(*ipos, format!("'{name}' is not an array")));
                         };
                         if let Some(k) = constant_index(index) {
                             if k < 0.0 || k as usize >= len {
@@ -421,15 +395,7 @@ impl Compiler {
                         let index = self.expr(index, depth + 1)?;
                         let value = self.expr(&value, depth + 2)?;
                         let dst = self.temp(depth);
-                        op(
-                            dst,
-                            Op::Scatter {
-                                base,
-                                len,
-                                index,
-                                value,
-                            },
-                        )
+                        op(dst, Op::Scatter { base, len, index, value, keep: true })
                     }
                     _ => unreachable!("the parser only builds assignments to names and elements"),
                 }
@@ -437,33 +403,18 @@ impl Compiler {
         }
     }
 
-    fn call(
-        &mut self,
-        name: &str,
-        args: &[Expr],
-        pos: Pos,
-        depth: usize,
-    ) -> Result<CExpr, SourceError> {
+    fn call(&mut self, name: &str, args: &[Expr], pos: Pos, depth: usize) -> Result<CExpr, SourceError> {
         let arity = |n: usize| -> Result<(), SourceError> {
             if args.len() == n {
                 Ok(())
             } else {
                 Err(SourceError::new(
                     pos,
-                    format!(
-                        "{name}() takes {n} argument{}, got {}",
-                        if n == 1 { "" } else { "s" },
-                        args.len()
-                    ),
+                    format!("{name}() takes {n} argument{}, got {}", if n == 1 { "" } else { "s" }, args.len()),
                 ))
             }
         };
-        let op = |dst, op| {
-            Ok(CExpr::Op {
-                dst,
-                op: Box::new(op),
-            })
-        };
+        let op = |dst, op| Ok(CExpr::Op { dst, op: Box::new(op) });
         if let Some((_, f)) = FUNCTIONS_1.iter().find(|(n, _)| *n == name) {
             arity(1)?;
             let a = self.expr(&args[0], depth + 1)?;
@@ -488,25 +439,14 @@ impl Compiler {
             // Variadic: folded left into binary nodes, f(f(a, b), c)…; avg divides the sum.
             "min" | "max" | "sum" | "avg" => {
                 if args.is_empty() {
-                    return Err(SourceError::new(
-                        pos,
-                        format!("{name}() needs at least one argument"),
-                    ));
+                    return Err(SourceError::new(pos, format!("{name}() needs at least one argument")));
                 }
-                let pairwise = if name == "avg" {
-                    "\0sum".to_string()
-                } else {
-                    format!("\0{name}")
-                };
-                let folded = args[1..].iter().fold(args[0].clone(), |acc, a| {
-                    Expr::Call(pairwise.clone(), vec![acc, a.clone()], pos)
-                });
+                let pairwise = if name == "avg" { "\0sum".to_string() } else { format!("\0{name}") };
+                let folded = args[1..]
+                    .iter()
+                    .fold(args[0].clone(), |acc, a| Expr::Call(pairwise.clone(), vec![acc, a.clone()], pos));
                 let whole = if name == "avg" {
-                    Expr::Binary(
-                        BinOp::Div,
-                        Box::new(folded),
-                        Box::new(Expr::Num(args.len() as f64)),
-                    )
+                    Expr::Binary(BinOp::Div, Box::new(folded), Box::new(Expr::Num(args.len() as f64)))
                 } else {
                     folded
                 };
@@ -529,64 +469,34 @@ impl Compiler {
                 let b = self.expr(&args[1], depth + 2)?;
                 let c = self.expr(&args[2], depth + 3)?;
                 let dst = self.temp(depth);
-                op(
-                    dst,
-                    Op::Call3(
-                        if name == "clamp" {
-                            Fn3::Clamp
-                        } else {
-                            Fn3::InRange
-                        },
-                        a,
-                        b,
-                        c,
-                    ),
-                )
+                op(dst, Op::Call3(if name == "clamp" { Fn3::Clamp } else { Fn3::InRange }, a, b, c))
             }
             "if" => {
                 arity(3)?;
                 self.expr(
-                    &Expr::Ternary(
-                        Box::new(args[0].clone()),
-                        Box::new(args[1].clone()),
-                        Box::new(args[2].clone()),
-                    ),
+                    &Expr::Ternary(Box::new(args[0].clone()), Box::new(args[1].clone()), Box::new(args[2].clone())),
                     depth,
                 )
             }
             _ => Err(SourceError::new(
                 pos,
-                format!(
-                    "unknown function '{name}' (known: {})",
-                    function_names().join(", ")
-                ),
+                format!("unknown function '{name}' (known: {})", function_names().join(", ")),
             )),
         }
     }
 
     fn stmts(&mut self, stmts: &[Stmt]) -> Result<Vec<CStmt>, SourceError> {
         self.scopes.push(HashMap::new());
-        let out = stmts
-            .iter()
-            .map(|s| self.stmt(s))
-            .collect::<Result<Vec<_>, _>>();
+        let out = stmts.iter().map(|s| self.stmt(s)).collect::<Result<Vec<_>, _>>();
         self.scopes.pop();
         Ok(out?.into_iter().flatten().collect())
     }
 
     fn stmt(&mut self, s: &Stmt) -> Result<Vec<CStmt>, SourceError> {
         Ok(match s {
-            Stmt::Var {
-                name,
-                size,
-                init,
-                pos,
-            } => {
+            Stmt::Var { name, size, init, pos } => {
                 if self.scopes.last().unwrap().contains_key(name) {
-                    return Err(SourceError::new(
-                        *pos,
-                        format!("'{name}' is already declared in this scope"),
-                    ));
+                    return Err(SourceError::new(*pos, format!("'{name}' is already declared in this scope")));
                 }
                 if RandomParameter::from_name(name).is_some()
                     || Feature::from_name(name.trim_end_matches("_1")).is_some()
@@ -597,69 +507,48 @@ impl Compiler {
                     ));
                 }
                 // Initial values are compiled before the name exists (`var x := x` is an error).
-                let values = init
-                    .iter()
-                    .map(|e| self.expr(e, 1))
-                    .collect::<Result<Vec<_>, _>>()?;
+                let values = init.iter().map(|e| self.expr(e, 1)).collect::<Result<Vec<_>, _>>()?;
                 let n = size.unwrap_or(1);
                 let base = self.new_slot(n);
-                let symbol = if size.is_some() {
-                    Symbol::Array(base, n)
-                } else {
-                    Symbol::Scalar(base)
-                };
+                let symbol = if size.is_some() { Symbol::Array(base, n) } else { Symbol::Scalar(base) };
                 self.scopes.last_mut().unwrap().insert(name.clone(), symbol);
                 let zero = self.constant(0.0);
                 (0..n)
                     .map(|i| {
                         let value = values.get(i).cloned().unwrap_or(CExpr::Slot(zero));
                         let dst = self.temp(0);
-                        CStmt::Eval(CExpr::Op {
-                            dst,
-                            op: Box::new(Op::Store {
-                                target: base + i,
-                                value,
-                            }),
-                        })
+                        CStmt::Eval(CExpr::Op { dst, op: Box::new(Op::Store { target: base + i, value, keep: false }) })
                     })
                     .collect()
             }
-            Stmt::Expr(e) => vec![CStmt::Eval(self.expr(e, 0)?)],
+            Stmt::Expr(e) => {
+                let mut compiled = self.expr(e, 0)?;
+                // A statement's own assignment: its value is not used.
+                if let CExpr::Op { op, .. } = &mut compiled {
+                    if let Op::Store { keep, .. } | Op::Scatter { keep, .. } = &mut **op {
+                        *keep = false;
+                    }
+                }
+                vec![CStmt::Eval(compiled)]
+            }
             Stmt::Block(b) => self.stmts(b)?,
-            Stmt::If {
-                cond,
-                then,
-                otherwise,
-            } => {
+            Stmt::If { cond, then, otherwise } => {
                 vec![CStmt::If {
                     cond: self.expr(cond, 0)?,
                     then: self.stmts(then)?,
                     otherwise: self.stmts(otherwise)?,
                 }]
             }
-            Stmt::While {
-                cond,
-                body,
-                step,
-                pos,
-            } => {
+            Stmt::While { cond, body, step, pos } => {
                 let cond = self.expr(cond, 0)?;
                 self.loop_depth += 1;
                 let body = self.stmts(body);
                 self.loop_depth -= 1;
                 let step = step.as_ref().map(|e| self.expr(e, 0)).transpose()?;
-                vec![CStmt::While {
-                    cond,
-                    body: body?,
-                    step,
-                    pos: *pos,
-                }]
+                vec![CStmt::While { cond, body: body?, step, pos: *pos }]
             }
             Stmt::Break(pos) | Stmt::Continue(pos) if self.loop_depth == 0 => {
-                return Err(SourceError::new(
-                    *pos,
-                    "'break' and 'continue' belong inside a loop",
-                ))
+                return Err(SourceError::new(*pos, "'break' and 'continue' belong inside a loop"))
             }
             Stmt::Break(_) => vec![CStmt::Break],
             Stmt::Continue(_) => vec![CStmt::Continue],
@@ -715,10 +604,7 @@ impl Program {
 
     /// The slot of a feature, if the program names it.
     pub fn feature_slot(&self, f: Feature, number: u8) -> Option<usize> {
-        self.features
-            .iter()
-            .find(|(g, n, _)| *g == f && *n == number)
-            .map(|(_, _, s)| *s)
+        self.features.iter().find(|(g, n, _)| *g == f && *n == number).map(|(_, _, s)| *s)
     }
 
     /// The features the program assigns or reads.
@@ -747,10 +633,7 @@ impl Program {
             }
         }
         kept.reverse();
-        Program {
-            stmts: kept,
-            ..self.clone()
-        }
+        Program { stmts: kept, ..self.clone() }
     }
 
     /// Number of top-level statements (for tests of specialisation).
@@ -806,19 +689,11 @@ fn relocate(e: &mut CExpr, base: usize) {
 fn relocate_stmt(s: &mut CStmt, base: usize) {
     match s {
         CStmt::Eval(e) => relocate(e, base),
-        CStmt::If {
-            cond,
-            then,
-            otherwise,
-        } => {
+        CStmt::If { cond, then, otherwise } => {
             relocate(cond, base);
-            then.iter_mut()
-                .chain(otherwise.iter_mut())
-                .for_each(|s| relocate_stmt(s, base));
+            then.iter_mut().chain(otherwise.iter_mut()).for_each(|s| relocate_stmt(s, base));
         }
-        CStmt::While {
-            cond, body, step, ..
-        } => {
+        CStmt::While { cond, body, step, .. } => {
             relocate(cond, base);
             body.iter_mut().for_each(|s| relocate_stmt(s, base));
             if let Some(step) = step {
@@ -851,16 +726,11 @@ fn expr_slots(e: &CExpr, reads: &mut Vec<usize>, writes: &mut Vec<usize>) {
             reads.extend(*base..*base + *len);
             expr_slots(index, reads, writes);
         }
-        Op::Store { target, value } => {
+        Op::Store { target, value, .. } => {
             writes.push(*target);
             expr_slots(value, reads, writes);
         }
-        Op::Scatter {
-            base,
-            len,
-            index,
-            value,
-        } => {
+        Op::Scatter { base, len, index, value, .. } => {
             writes.extend(*base..*base + *len);
             // An element write keeps the other elements: the array is read too.
             reads.extend(*base..*base + *len);
@@ -873,22 +743,14 @@ fn expr_slots(e: &CExpr, reads: &mut Vec<usize>, writes: &mut Vec<usize>) {
 fn stmt_slots(s: &CStmt, reads: &mut Vec<usize>, writes: &mut Vec<usize>) {
     match s {
         CStmt::Eval(e) => expr_slots(e, reads, writes),
-        CStmt::If {
-            cond,
-            then,
-            otherwise,
-        } => {
+        CStmt::If { cond, then, otherwise } => {
             expr_slots(cond, reads, writes);
-            then.iter()
-                .chain(otherwise)
-                .for_each(|s| stmt_slots(s, reads, writes));
+            then.iter().chain(otherwise).for_each(|s| stmt_slots(s, reads, writes));
             // A conditional write keeps the old value in other lanes.
             let w = writes.clone();
             reads.extend(w);
         }
-        CStmt::While {
-            cond, body, step, ..
-        } => {
+        CStmt::While { cond, body, step, .. } => {
             expr_slots(cond, reads, writes);
             body.iter().for_each(|s| stmt_slots(s, reads, writes));
             if let Some(step) = step {
@@ -958,12 +820,7 @@ impl<'p> Machine<'p> {
         self.block(&program.stmts, mask, &mut LoopState::default())
     }
 
-    fn block(
-        &mut self,
-        stmts: &[CStmt],
-        mask: Mask,
-        state: &mut LoopState,
-    ) -> Result<(), RuntimeError> {
+    fn block(&mut self, stmts: &[CStmt], mask: Mask, state: &mut LoopState) -> Result<(), RuntimeError> {
         for stmt in stmts {
             let live = mask & !(state.broken | state.continued);
             if live == 0 {
@@ -973,11 +830,7 @@ impl<'p> Machine<'p> {
                 CStmt::Eval(e) => {
                     self.eval(e, live);
                 }
-                CStmt::If {
-                    cond,
-                    then,
-                    otherwise,
-                } => {
+                CStmt::If { cond, then, otherwise } => {
                     let c = self.truth(cond, live);
                     if live & c != 0 {
                         self.block(then, live & c, state)?;
@@ -986,12 +839,7 @@ impl<'p> Machine<'p> {
                         self.block(otherwise, live & !c, state)?;
                     }
                 }
-                CStmt::While {
-                    cond,
-                    body,
-                    step,
-                    pos,
-                } => {
+                CStmt::While { cond, body, step, pos } => {
                     let mut active = live;
                     let mut iterations = 0u64;
                     loop {
@@ -1065,55 +913,41 @@ impl<'p> Machine<'p> {
                 }
             }
             Op::Select(c, a, b) => {
-                let cs = self.eval(c, mask);
-                let bits = self.truth_of(cs);
+                let bits = self.truth(c, mask);
                 // Each branch runs only for its own lanes (branches may assign);
                 // a branch no lane takes is skipped.
                 let zero = self.program.zero;
-                let a = if mask & bits != 0 {
-                    self.eval(a, mask & bits)
-                } else {
-                    zero
-                };
-                let b = if mask & !bits != 0 {
-                    self.eval(b, mask & !bits)
-                } else {
-                    zero
-                };
+                let a = if mask & bits != 0 { self.eval(a, mask & bits) } else { zero };
+                let b = if mask & !bits != 0 { self.eval(b, mask & !bits) } else { zero };
                 let p = self.slots.as_mut_ptr();
-                // SAFETY: dst is this operation's own temporary, distinct from cs, a and b.
-                let (c, a, b, out) =
-                    unsafe { (&*p.add(cs), &*p.add(a), &*p.add(b), &mut *p.add(dst)) };
+                // SAFETY: dst is this operation's own temporary, distinct from a and b.
+                let (a, b, out) = unsafe { (&*p.add(a), &*p.add(b), &mut *p.add(dst)) };
+                // Select by the condition as it was before the branches ran
+                // (a branch may assign to a variable the condition reads).
                 for i in 0..LANES {
-                    out[i] = if c[i] != 0.0 { a[i] } else { b[i] };
+                    out[i] = if (bits >> i) & 1 == 1 { a[i] } else { b[i] };
                 }
             }
             Op::Gather { base, len, index } => {
                 let index = self.eval(index, mask);
                 for i in 0..LANES {
                     let k = self.slots[index][i].floor();
-                    self.slots[dst][i] = if k >= 0.0 && (k as usize) < *len {
-                        self.slots[base + k as usize][i]
-                    } else {
-                        f64::NAN
-                    };
+                    self.slots[dst][i] =
+                        if k >= 0.0 && (k as usize) < *len { self.slots[base + k as usize][i] } else { f64::NAN };
                 }
             }
-            Op::Store { target, value } => {
+            Op::Store { target, value, keep } => {
                 let v = self.eval(value, mask);
                 if v != *target {
                     let (value, out) = self.pair(v, *target);
                     store(out, value, mask);
                 }
-                // The assignment's value is the variable itself: no copy.
-                return *target;
+                if !keep {
+                    return *target;
+                }
+                self.slots[dst] = self.slots[*target];
             }
-            Op::Scatter {
-                base,
-                len,
-                index,
-                value,
-            } => {
+            Op::Scatter { base, len, index, value, keep } => {
                 let index = self.eval(index, mask);
                 let value = self.eval(value, mask);
                 for i in (0..LANES).filter(|i| (mask >> i) & 1 == 1) {
@@ -1122,7 +956,11 @@ impl<'p> Machine<'p> {
                         self.slots[base + k as usize][i] = self.slots[value][i];
                     }
                 }
-                return value;
+                if !keep {
+                    return value;
+                }
+                // The value lives in a temporary a sibling may reuse: copy it.
+                self.slots[dst] = self.slots[value];
             }
         }
         dst

@@ -53,11 +53,7 @@ impl std::fmt::Display for ReferenceNote {
 }
 
 /// Builds (or keeps) a scene's reference; returns its note.
-pub fn build(
-    meta: &SceneMeta,
-    force: bool,
-    spp_override: Option<u64>,
-) -> anyhow::Result<ReferenceNote> {
+pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
     let note_file = out.with_extension("json");
     if !force && out.is_file() && note_file.is_file() {
@@ -81,29 +77,16 @@ pub fn build(
             let a = render_image(&scene, spp / 2, 1_000_001).map_err(anyhow::Error::msg)?;
             let b = render_image(&scene, spp - spp / 2, 1_000_002).map_err(anyhow::Error::msg)?;
             let w = (spp / 2) as f64 / spp as f64;
-            let mean: Vec<f32> = a
-                .iter()
-                .zip(&b)
-                .map(|(a, b)| (*a as f64 * w + *b as f64 * (1.0 - w)) as f32)
-                .collect();
-            let rms = (a
-                .iter()
-                .zip(&b)
-                .map(|(a, b)| ((a - b) as f64).powi(2))
-                .sum::<f64>()
-                / a.len() as f64)
-                .sqrt();
+            let mean: Vec<f32> =
+                a.iter().zip(&b).map(|(a, b)| (*a as f64 * w + *b as f64 * (1.0 - w)) as f32).collect();
+            let rms = (a.iter().zip(&b).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / a.len() as f64).sqrt();
             (mean, spp, rms / 2.0)
         }
         ReferenceMethod::ClosedForm { formula } => {
             let q = spp_override.unwrap_or(256) as u32;
             let fine = closed_form(formula, &scene, q)?;
             let coarse = closed_form(formula, &scene, q / 2)?;
-            let change = fine
-                .iter()
-                .zip(&coarse)
-                .map(|(a, b)| (a - b).abs() as f64)
-                .fold(0.0, f64::max);
+            let change = fine.iter().zip(&coarse).map(|(a, b)| (a - b).abs() as f64).fold(0.0, f64::max);
             (fine, q as u64, change)
         }
     };
@@ -139,9 +122,7 @@ pub fn closed_form(formula: &str, scene: &Scene, q: u32) -> anyhow::Result<Vec<f
                 [v, v, v]
             }),
             Box::new(move |x, y| {
-                let near = |px: f64, py: f64| {
-                    (((px / w - 0.5).powi(2) + (py / h - 0.5).powi(2)) - 0.25).abs()
-                };
+                let near = |px: f64, py: f64| (((px / w - 0.5).powi(2) + (py / h - 0.5).powi(2)) - 0.25).abs();
                 near(x + 0.5, y + 0.5) < 2.0 / w.min(h)
             }),
         ),
@@ -162,34 +143,24 @@ pub fn closed_form(formula: &str, scene: &Scene, q: u32) -> anyhow::Result<Vec<f
     };
     let (iw, ih) = (scene.width as usize, scene.height as usize);
     let mut image = vec![0f32; iw * ih * 3];
-    image
-        .par_chunks_mut(iw * 3)
-        .enumerate()
-        .for_each(|(y, row)| {
-            for x in 0..iw {
-                let (px, py) = (x as f64, y as f64);
-                let n = if kinky(px, py) {
-                    q.max(8)
-                } else {
-                    (q / 8).max(4)
-                };
-                let mut sum = [0.0f64; 3];
-                for j in 0..n {
-                    for i in 0..n {
-                        let v = f(
-                            px + (i as f64 + 0.5) / n as f64,
-                            py + (j as f64 + 0.5) / n as f64,
-                        );
-                        for c in 0..3 {
-                            sum[c] += v[c];
-                        }
+    image.par_chunks_mut(iw * 3).enumerate().for_each(|(y, row)| {
+        for x in 0..iw {
+            let (px, py) = (x as f64, y as f64);
+            let n = if kinky(px, py) { q.max(8) } else { (q / 8).max(4) };
+            let mut sum = [0.0f64; 3];
+            for j in 0..n {
+                for i in 0..n {
+                    let v = f(px + (i as f64 + 0.5) / n as f64, py + (j as f64 + 0.5) / n as f64);
+                    for c in 0..3 {
+                        sum[c] += v[c];
                     }
                 }
-                for c in 0..3 {
-                    row[x * 3 + c] = (sum[c] / (n * n) as f64) as f32;
-                }
             }
-        });
+            for c in 0..3 {
+                row[x * 3 + c] = (sum[c] / (n * n) as f64) as f32;
+            }
+        }
+    });
     Ok(image)
 }
 
@@ -203,15 +174,12 @@ pub fn bench(scenes: &Path) -> anyhow::Result<()> {
         let samples = scene.width as f64 * scene.height as f64 * spp as f64;
         let mut line = format!("{name:<11} {}×{} × {spp} spp:", scene.width, scene.height);
         for threads in [1, cores] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()?;
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
             // Best of three: the figure a quiet machine gives.
             let best = (0..3)
                 .map(|i| {
                     let t = Instant::now();
-                    pool.install(|| render_image(&scene, spp, i))
-                        .map_err(anyhow::Error::msg)?;
+                    pool.install(|| render_image(&scene, spp, i)).map_err(anyhow::Error::msg)?;
                     Ok(t.elapsed().as_secs_f64())
                 })
                 .collect::<anyhow::Result<Vec<f64>>>()?

@@ -5,9 +5,9 @@
 //! drawn here, stratified per pixel and seeded from (pixel, request, sample
 //! index, dimension), so a run is reproducible: the pairs IMAGE_X/IMAGE_Y,
 //! LENS_U/LENS_V and LIGHT_X/LIGHT_Y are multi-jittered on a ⌈√spp⌉² grid
-//! (stratified in 2-D and, for square spp, in each 1-D projection), TIME in
-//! `spp` strata; each dimension goes through its own per-pixel permutation
-//! of the sample index so dimensions are not correlated. Free samples (count requests) are
+//! (uniform in 2-D for any spp; for square spp one sample per cell and per
+//! 1-D interval), TIME in `spp` strata; each pair goes through its own
+//! per-pixel permutation so dimensions are not correlated. Free samples (count requests) are
 //! uniform over the image.
 
 use crate::program::{Machine, Program, LANES};
@@ -49,10 +49,7 @@ const PRIMES: [u64; 12] = [7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47];
 
 /// A multiplier coprime with `n`, different per dimension.
 fn coprime(n: u64, dimension: usize) -> u64 {
-    (0..PRIMES.len())
-        .map(|k| PRIMES[(dimension * 3 + k) % PRIMES.len()])
-        .find(|p| n % p != 0)
-        .unwrap_or(1)
+    (0..PRIMES.len()).map(|k| PRIMES[(dimension * 3 + k) % PRIMES.len()]).find(|p| n % p != 0).unwrap_or(1)
 }
 
 /// Draws the random parameters of samples.
@@ -71,7 +68,13 @@ pub struct Strata {
     inv_spp: f64,
     k: u64,
     inv_k: f64,
-    a: [u64; 4],
+    cells: u64,
+    inv_cells: f64,
+    /// Multipliers of the affine permutations: of `0..spp` (time), of the
+    /// k² cells (pairs), of `0..k` (sub-positions in a cell).
+    a_time: u64,
+    a_cell: u64,
+    a_sub: u64,
 }
 
 impl Strata {
@@ -84,7 +87,11 @@ impl Strata {
             inv_spp: 1.0 / spp as f64,
             k,
             inv_k: 1.0 / k as f64,
-            a: [1, coprime(spp, 1), coprime(spp, 2), coprime(spp, 3)],
+            cells: k * k,
+            inv_cells: 1.0 / (k * k) as f64,
+            a_time: coprime(spp, 3),
+            a_cell: coprime(k * k, 1),
+            a_sub: coprime(k, 2),
         }
     }
 }
@@ -95,17 +102,15 @@ pub struct PixelSeed {
     x: u32,
     y: u32,
     seed: u64,
-    offsets: [u64; 4],
+    /// Random offsets of the time permutation and of the three pairs' cell permutations.
+    time_offset: u64,
+    cell_offsets: [u64; 3],
 }
 
 impl Sampler {
     /// A sampler for one request of a session.
     pub fn new(width: u32, height: u32, request: u64) -> Self {
-        Sampler {
-            width,
-            height,
-            request,
-        }
+        Sampler { width, height, request }
     }
 
     /// The per-pixel state of pixel `(x, y)`.
@@ -113,56 +118,59 @@ impl Sampler {
     pub fn pixel(&self, x: u32, y: u32, strata: &Strata) -> PixelSeed {
         let index = (y as u64) * self.width as u64 + x as u64;
         let seed = mix(index ^ mix(self.request.wrapping_add(0x5EED)));
-        let offset = |d: u64| mix(seed ^ d) % strata.spp;
+        let offset = |d: u64, n: u64| mix(seed ^ d) % n;
         PixelSeed {
             x,
             y,
             seed,
-            offsets: [0, offset(1), offset(2), offset(3)],
+            time_offset: offset(3, strata.spp),
+            cell_offsets: [offset(4, strata.cells), offset(5, strata.cells), offset(6, strata.cells)],
         }
     }
 
     /// The parameters in `needed` (bit `d` = dimension `d`) of sample `s`
     /// of a pixel; the others are left 0.
+    ///
+    /// Each pair (IMAGE, LENS, LIGHT) is multi-jittered: sample `s` takes
+    /// cell `(a·s + b) mod k²` of a k × k grid (all cells once when spp = k²;
+    /// otherwise an evenly spread random subset, each cell equally likely),
+    /// and inside its cell the sub-column and sub-row come from random
+    /// permutations per column and per row, so the 2-D distribution is
+    /// uniform and, for square spp, each 1-D projection has one sample in
+    /// each of k² intervals. TIME has one sample in each of spp intervals.
     #[inline(always)]
     pub fn pixel_sample(&self, pixel: &PixelSeed, strata: &Strata, s: u64, needed: u8) -> [f64; 7] {
         let u = |d: u64| uniform(mix(pixel.seed ^ (s << 4 | d)));
         let (k, inv_k) = (strata.k, strata.inv_k);
         let below_one = |v: f64| v.min(1.0 - f64::EPSILON);
-        // Multi-jittered pairs: the sample is in cell (column, row) of the
-        // k × k grid, and within it at sub-column `row` and sub-row `column`,
-        // so each 1-D projection is stratified into k² intervals too.
-        let pair = |index: u64, dx: u64, dy: u64| {
-            let (row, column) = div_mod(index, k, inv_k);
+        let pair = |which: usize, dx: u64, dy: u64| {
+            let cell = div_mod(strata.a_cell * s + pixel.cell_offsets[which], strata.cells, strata.inv_cells).1;
+            let (row, column) = div_mod(cell, k, inv_k);
+            let shuffle = |axis: u64, line: u64, position: u64| {
+                let offset = mix(pixel.seed ^ ((which as u64 * 2 + axis) << 40) ^ line);
+                div_mod(strata.a_sub * position + (offset >> 16), k, inv_k).1
+            };
+            let sub_x = shuffle(0, column, row) as i64 as f64;
+            let sub_y = shuffle(1, row, column) as i64 as f64;
             let (c, r) = (column as i64 as f64, row as i64 as f64);
-            (
-                below_one((c + (r + u(dx)) * inv_k) * inv_k),
-                below_one((r + (c + u(dy)) * inv_k) * inv_k),
-            )
-        };
-        let permuted = |d: usize| {
-            div_mod(
-                strata.a[d] * s + pixel.offsets[d],
-                strata.spp,
-                strata.inv_spp,
-            )
-            .1
+            (below_one((c + (sub_x + u(dx)) * inv_k) * inv_k), below_one((r + (sub_y + u(dy)) * inv_k) * inv_k))
         };
         let mut p = [0.0; 7];
         let has = |d: usize| needed & (1 << d) != 0;
         if has(0) || has(1) {
-            let (x, y) = pair(s, 0, 1);
+            let (x, y) = pair(0, 0, 1);
             p[0] = pixel.x as f64 + x;
             p[1] = pixel.y as f64 + y;
         }
         if has(2) || has(3) {
-            (p[2], p[3]) = pair(permuted(1), 2, 3);
+            (p[2], p[3]) = pair(1, 2, 3);
         }
         if has(4) {
-            p[4] = below_one((permuted(3) as i64 as f64 + u(4)) * strata.inv_spp);
+            let stratum = div_mod(strata.a_time * s + pixel.time_offset, strata.spp, strata.inv_spp).1;
+            p[4] = below_one((stratum as i64 as f64 + u(4)) * strata.inv_spp);
         }
         if has(5) || has(6) {
-            (p[5], p[6]) = pair(permuted(2), 5, 6);
+            (p[5], p[6]) = pair(2, 5, 6);
         }
         p
     }
@@ -213,11 +221,7 @@ impl Bindings {
                     None
                 }
                 Element::Parameter(p) => Some(Source::Parameter(p.index())),
-                Element::Feature(f, n) => Some(
-                    program
-                        .feature_slot(*f, *n)
-                        .map_or(Source::Zero, Source::Slot),
-                ),
+                Element::Feature(f, n) => Some(program.feature_slot(*f, *n).map_or(Source::Zero, Source::Slot)),
             })
             .collect();
         let mut needed = 0u8;
@@ -227,11 +231,7 @@ impl Bindings {
                 needed |= 1 << p.index();
             }
         }
-        Bindings {
-            outputs,
-            inputs,
-            needed,
-        }
+        Bindings { outputs, inputs, needed }
     }
 }
 
@@ -289,10 +289,7 @@ fn fill(
                     if strata.spp != spp.max(1) {
                         *strata = Strata::new(spp);
                     }
-                    if pixel
-                        .as_ref()
-                        .is_none_or(|px: &PixelSeed| (px.x, px.y) != (x, y))
-                    {
+                    if pixel.as_ref().is_none_or(|px: &PixelSeed| (px.x, px.y) != (x, y)) {
                         *pixel = Some(sampler.pixel(x, y, strata));
                     }
                     sampler.pixel_sample(pixel.as_ref().unwrap(), strata, s, bindings.needed)
@@ -307,9 +304,7 @@ fn fill(
             }
             params[lane] = p;
         }
-        machine
-            .run_samples(&params[..n])
-            .map_err(|e| scene.runtime_error(e.pos, &e.message))?;
+        machine.run_samples(&params[..n]).map_err(|e| scene.runtime_error(e.pos, &e.message))?;
         for (i, source) in bindings.outputs.iter().enumerate() {
             let Some(source) = source else { continue };
             for lane in 0..n {
@@ -362,38 +357,18 @@ pub fn evaluate(scene: &Scene, program: &Program, eval: &Evaluation) -> Result<(
             let mut pipe = eval.pipe(*tile).map_err(|e| e.to_string())?;
             let mut positions: Box<dyn Iterator<Item = Position>> = match *tile {
                 Tile::Pixels { rect, spp } => Box::new((rect.y0..rect.y1).flat_map(move |y| {
-                    (rect.x0..rect.x1).flat_map(move |x| {
-                        (0..spp as u64).map(move |s| Position::Pixel {
-                            x,
-                            y,
-                            s,
-                            spp: spp as u64,
-                        })
-                    })
+                    (rect.x0..rect.x1)
+                        .flat_map(move |x| (0..spp as u64).map(move |s| Position::Pixel { x, y, s, spp: spp as u64 }))
                 })),
-                Tile::Samples { count } => {
-                    Box::new((first..first + count).map(|index| Position::Free { index }))
-                }
+                Tile::Samples { count } => Box::new((first..first + count).map(|index| Position::Free { index })),
             };
-            fill(
-                machine,
-                scene,
-                &bindings,
-                layout,
-                &sampler,
-                pipe.raw(),
-                &mut positions,
-                &problems,
-            )?;
+            fill(machine, scene, &bindings, layout, &sampler, pipe.raw(), &mut positions, &problems)?;
             pipe.finish().map_err(|e| e.to_string())
         },
     )?;
     if let Some((n, first)) = problems.report() {
         // Delivered as computed (a renderer must not hide a scene's NaN), and said loudly.
-        eprintln!(
-            "{}: warning: {n} NaN or infinite values in request {}; first: {first}",
-            scene.name, eval.request
-        );
+        eprintln!("{}: warning: {n} NaN or infinite values in request {}; first: {first}", scene.name, eval.request);
     }
     Ok(())
 }
@@ -402,21 +377,11 @@ pub fn evaluate(scene: &Scene, program: &Program, eval: &Evaluation) -> Result<(
 /// current rayon pool, accumulating in f64 (references, benchmarks).
 pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, String> {
     use rayon::prelude::*;
-    let wanted = [
-        (Feature::ColorR, 0),
-        (Feature::ColorG, 0),
-        (Feature::ColorB, 0),
-    ];
+    let wanted = [(Feature::ColorR, 0), (Feature::ColorG, 0), (Feature::ColorB, 0)];
     let program = scene.program.specialise(&wanted);
-    let slots: Vec<Option<usize>> = wanted
-        .iter()
-        .map(|(f, n)| program.feature_slot(*f, *n))
-        .collect();
+    let slots: Vec<Option<usize>> = wanted.iter().map(|(f, n)| program.feature_slot(*f, *n)).collect();
     let sampler = Sampler::new(scene.width, scene.height, request);
-    let needed = RandomParameter::ALL
-        .iter()
-        .filter(|p| program.uses(**p))
-        .fold(0u8, |m, p| m | 1 << p.index());
+    let needed = RandomParameter::ALL.iter().filter(|p| program.uses(**p)).fold(0u8, |m, p| m | 1 << p.index());
     let (w, h) = (scene.width as usize, scene.height as usize);
     let mut image = vec![0f32; w * h * 3];
     image.par_chunks_mut(w * 3).enumerate().try_for_each_init(
@@ -442,9 +407,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
                     *column = x as usize * 3;
                     s += 1;
                 }
-                machine
-                    .run_samples(&params[..n])
-                    .map_err(|e| scene.runtime_error(e.pos, &e.message))?;
+                machine.run_samples(&params[..n]).map_err(|e| scene.runtime_error(e.pos, &e.message))?;
                 for (c, slot) in slots.iter().enumerate() {
                     let Some(slot) = slot else { continue };
                     let lanes = machine.slot(*slot);

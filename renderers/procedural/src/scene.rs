@@ -54,36 +54,20 @@ impl Scene {
             offset += line.len();
         }
         let Some((hash_line, header_end, program_start)) = split else {
-            return Err(format!("{name}: no line holding only '#' separates the header (width, height, spp) from the program"));
+            return Err(format!(
+                "{name}: no line holding only '#' separates the header (width, height, spp) from the program"
+            ));
         };
-        let origin = Pos {
-            line: 1,
-            col: 1,
-            offset: 0,
-        };
+        let origin = Pos { line: 1, col: 1, offset: 0 };
         let header = parse_program(&text[..header_end], origin).map_err(render)?;
         let (mut width, mut height, mut spp) = (None, None, 64u32);
         for stmt in &header {
-            let Stmt::Expr(Expr::Assign {
-                target,
-                op: None,
-                value,
-                pos,
-            }) = stmt
-            else {
-                return Err(format!(
-                    "{name}: the header holds only assignments like 'width := 512;'"
-                ));
+            let Stmt::Expr(Expr::Assign { target, op: None, value, pos }) = stmt else {
+                return Err(format!("{name}: the header holds only assignments like 'width := 512;'"));
             };
-            let Expr::Name(key, kpos) = &**target else {
-                unreachable!("assignments target names")
-            };
-            let v = constant(value).ok_or_else(|| {
-                render(SourceError::new(
-                    *pos,
-                    format!("'{key}' must be a constant number"),
-                ))
-            })?;
+            let Expr::Name(key, kpos) = &**target else { unreachable!("assignments target names") };
+            let v = constant(value)
+                .ok_or_else(|| render(SourceError::new(*pos, format!("'{key}' must be a constant number"))))?;
             let whole = |v: f64| -> Result<u32, String> {
                 if v >= 1.0 && v.fract() == 0.0 && v <= 1e5 {
                     Ok(v as u32)
@@ -107,44 +91,20 @@ impl Scene {
             }
         }
         let missing = |k: &str| format!("{name}: the header must set '{k}'");
-        let (width, height) = (
-            width.ok_or_else(|| missing("width"))?,
-            height.ok_or_else(|| missing("height"))?,
-        );
-        let start = Pos {
-            line: hash_line as u32 + 2,
-            col: 1,
-            offset: program_start,
-        };
+        let (width, height) = (width.ok_or_else(|| missing("width"))?, height.ok_or_else(|| missing("height"))?);
+        let start = Pos { line: hash_line as u32 + 2, col: 1, offset: program_start };
         let stmts = parse_program(&text[program_start..], start).map_err(render)?;
-        let program = Program::compile(
-            &stmts,
-            &[
-                ("width", width as f64),
-                ("height", height as f64),
-                ("spp", spp as f64),
-            ],
-        )
-        .map_err(render)?;
-        Ok(Scene {
-            name: name.to_string(),
-            width,
-            height,
-            spp,
-            program,
-            source: text.to_string(),
-        })
+        let program =
+            Program::compile(&stmts, &[("width", width as f64), ("height", height as f64), ("spp", spp as f64)])
+                .map_err(render)?;
+        Ok(Scene { name: name.to_string(), width, height, spp, program, source: text.to_string() })
     }
 
     /// The scene info: size, effects the program really has, parameters it reads.
     pub fn info(&self) -> SceneInfo {
         use RandomParameter::*;
         let uses = |p| self.program.uses(p);
-        let used: Vec<&str> = RandomParameter::ALL
-            .iter()
-            .filter(|p| uses(**p))
-            .map(|p| p.name())
-            .collect();
+        let used: Vec<&str> = RandomParameter::ALL.iter().filter(|p| uses(**p)).map(|p| p.name()).collect();
         let mut info = SceneInfo::new();
         info.set("width", self.width)
             .set("height", self.height)

@@ -47,23 +47,14 @@ pub struct SourceError {
 impl SourceError {
     /// An error at `pos`.
     pub fn new(pos: Pos, message: impl Into<String>) -> Self {
-        SourceError {
-            pos,
-            message: message.into(),
-        }
+        SourceError { pos, message: message.into() }
     }
 
     /// `file:line:col: message`, the source line and a caret under the column.
     pub fn render(&self, file: &str, source: &str) -> String {
-        let line = source
-            .lines()
-            .nth(self.pos.line.saturating_sub(1) as usize)
-            .unwrap_or("");
+        let line = source.lines().nth(self.pos.line.saturating_sub(1) as usize).unwrap_or("");
         let caret = " ".repeat(self.pos.col.saturating_sub(1) as usize);
-        format!(
-            "{file}:{}:{}: {}\n    {line}\n    {caret}^",
-            self.pos.line, self.pos.col, self.message
-        )
+        format!("{file}:{}:{}: {}\n    {line}\n    {caret}^", self.pos.line, self.pos.col, self.message)
     }
 }
 
@@ -93,19 +84,15 @@ impl fmt::Display for Tok {
 }
 
 const SYMBOLS: &[&str] = &[
-    ":=", "+=", "-=", "*=", "/=", "%=", "<=", ">=", "==", "!=", "<>", "(", ")", "[", "]", "{", "}",
-    ",", ";", "?", ":", "+", "-", "*", "/", "%", "^", "<", ">", "=", "&", "|",
+    ":=", "+=", "-=", "*=", "/=", "%=", "<=", ">=", "==", "!=", "<>", "(", ")", "[", "]", "{", "}", ",", ";", "?", ":",
+    "+", "-", "*", "/", "%", "^", "<", ">", "=", "&", "|",
 ];
 
 fn lex(source: &str, start: Pos) -> Result<Vec<(Tok, Pos)>, SourceError> {
     let mut tokens = Vec::new();
     let bytes = source.as_bytes();
     let (mut i, mut line, mut col) = (0usize, start.line, start.col);
-    let pos = |i: usize, line: u32, col: u32| Pos {
-        line,
-        col,
-        offset: start.offset + i,
-    };
+    let pos = |i: usize, line: u32, col: u32| Pos { line, col, offset: start.offset + i };
     while i < bytes.len() {
         let c = bytes[i];
         let here = pos(i, line, col);
@@ -128,9 +115,7 @@ fn lex(source: &str, start: Pos) -> Result<Vec<(Tok, Pos)>, SourceError> {
             continue;
         }
         if source[i..].starts_with("/*") {
-            let end = source[i + 2..]
-                .find("*/")
-                .ok_or_else(|| SourceError::new(here, "unterminated comment"))?;
+            let end = source[i + 2..].find("*/").ok_or_else(|| SourceError::new(here, "unterminated comment"))?;
             for ch in source[i..i + 2 + end + 2].chars() {
                 if ch == '\n' {
                     line += 1;
@@ -160,9 +145,8 @@ fn lex(source: &str, start: Pos) -> Result<Vec<(Tok, Pos)>, SourceError> {
                 }
             }
             let text = &source[s..i];
-            let value = text
-                .parse::<f64>()
-                .map_err(|_| SourceError::new(here, format!("malformed number '{text}'")))?;
+            let value =
+                text.parse::<f64>().map_err(|_| SourceError::new(here, format!("malformed number '{text}'")))?;
             tokens.push((Tok::Num(value), here));
             col += (i - s) as u32;
             continue;
@@ -184,10 +168,7 @@ fn lex(source: &str, start: Pos) -> Result<Vec<(Tok, Pos)>, SourceError> {
             }
             None => {
                 let ch = source[i..].chars().next().unwrap();
-                return Err(SourceError::new(
-                    here,
-                    format!("unexpected character '{ch}'"),
-                ));
+                return Err(SourceError::new(here, format!("unexpected character '{ch}'")));
             }
         }
     }
@@ -233,36 +214,17 @@ pub enum Expr {
     Not(Box<Expr>),
     Binary(BinOp, Box<Expr>, Box<Expr>),
     Ternary(Box<Expr>, Box<Expr>, Box<Expr>),
-    Assign {
-        target: Box<Expr>,
-        op: AssignOp,
-        value: Box<Expr>,
-        pos: Pos,
-    },
+    Assign { target: Box<Expr>, op: AssignOp, value: Box<Expr>, pos: Pos },
 }
 
 /// A parsed statement.
 #[derive(Debug, Clone, PartialEq)]
 #[allow(missing_docs)]
 pub enum Stmt {
-    Var {
-        name: String,
-        size: Option<usize>,
-        init: Vec<Expr>,
-        pos: Pos,
-    },
+    Var { name: String, size: Option<usize>, init: Vec<Expr>, pos: Pos },
     Expr(Expr),
-    If {
-        cond: Expr,
-        then: Vec<Stmt>,
-        otherwise: Vec<Stmt>,
-    },
-    While {
-        cond: Expr,
-        body: Vec<Stmt>,
-        step: Option<Expr>,
-        pos: Pos,
-    },
+    If { cond: Expr, then: Vec<Stmt>, otherwise: Vec<Stmt> },
+    While { cond: Expr, body: Vec<Stmt>, step: Option<Expr>, pos: Pos },
     Block(Vec<Stmt>),
     Break(Pos),
     Continue(Pos),
@@ -275,10 +237,7 @@ struct Parser {
 
 /// Parses a program whose text starts at `start` in its file.
 pub fn parse_program(source: &str, start: Pos) -> Result<Vec<Stmt>, SourceError> {
-    let mut p = Parser {
-        tokens: lex(source, start)?,
-        at: 0,
-    };
+    let mut p = Parser { tokens: lex(source, start)?, at: 0 };
     let stmts = p.statements(&Tok::End)?;
     p.expect_end()?;
     Ok(stmts)
@@ -315,19 +274,13 @@ impl Parser {
         if self.is_sym(s) {
             Ok(self.bump().1)
         } else {
-            Err(SourceError::new(
-                self.pos(),
-                format!("expected '{s}' but found {}", self.peek()),
-            ))
+            Err(SourceError::new(self.pos(), format!("expected '{s}' but found {}", self.peek())))
         }
     }
     fn expect_end(&self) -> Result<(), SourceError> {
         match self.peek() {
             Tok::End => Ok(()),
-            t => Err(SourceError::new(
-                self.pos(),
-                format!("expected ';' or end of program but found {t}"),
-            )),
+            t => Err(SourceError::new(self.pos(), format!("expected ';' or end of program but found {t}"))),
         }
     }
 
@@ -339,17 +292,11 @@ impl Parser {
             if self.peek() == end || matches!(self.peek(), Tok::End) {
                 return Ok(out);
             }
-            let braced = self.is_sym("{")
-                || self.is_word("if")
-                || self.is_word("while")
-                || self.is_word("for");
+            let braced = self.is_sym("{") || self.is_word("if") || self.is_word("while") || self.is_word("for");
             out.push(self.statement()?);
             // A statement ends at ';' or, after a braced body, anywhere.
             if !self.eat_sym(";") && !braced && self.peek() != end {
-                return Err(SourceError::new(
-                    self.pos(),
-                    format!("expected ';' but found {}", self.peek()),
-                ));
+                return Err(SourceError::new(self.pos(), format!("expected ';' but found {}", self.peek())));
             }
         }
     }
@@ -380,10 +327,7 @@ impl Parser {
                 let (name, npos) = match self.bump() {
                     (Tok::Name(n), p) => (n, p),
                     (t, p) => {
-                        return Err(SourceError::new(
-                            p,
-                            format!("expected a variable name after 'var' but found {t}"),
-                        ))
+                        return Err(SourceError::new(p, format!("expected a variable name after 'var' but found {t}")))
                     }
                 };
                 let size = if self.eat_sym("[") {
@@ -419,26 +363,13 @@ impl Parser {
                     if init.len() > n {
                         return Err(SourceError::new(
                             npos,
-                            format!(
-                                "array '{name}' has {n} elements but {} initial values",
-                                init.len()
-                            ),
+                            format!("array '{name}' has {n} elements but {} initial values", init.len()),
                         ));
                     }
                 }
-                Ok(Stmt::Var {
-                    name,
-                    size,
-                    init,
-                    pos: npos,
-                })
+                Ok(Stmt::Var { name, size, init, pos: npos })
             }
-            "if" if self
-                .tokens
-                .get(self.at + 1)
-                .is_some_and(|t| t.0 == Tok::Sym("("))
-                && !self.if_is_function() =>
-            {
+            "if" if self.tokens.get(self.at + 1).is_some_and(|t| t.0 == Tok::Sym("(")) && !self.if_is_function() => {
                 self.bump();
                 self.expect_sym("(")?;
                 let cond = self.expr()?;
@@ -454,52 +385,26 @@ impl Parser {
                     self.at = save;
                     Vec::new()
                 };
-                Ok(Stmt::If {
-                    cond,
-                    then,
-                    otherwise,
-                })
+                Ok(Stmt::If { cond, then, otherwise })
             }
             "while" => {
                 self.bump();
                 self.expect_sym("(")?;
                 let cond = self.expr()?;
                 self.expect_sym(")")?;
-                Ok(Stmt::While {
-                    cond,
-                    body: self.body()?,
-                    step: None,
-                    pos,
-                })
+                Ok(Stmt::While { cond, body: self.body()?, step: None, pos })
             }
             "for" => {
                 self.bump();
                 self.expect_sym("(")?;
-                let init = if self.is_sym(";") {
-                    None
-                } else {
-                    Some(self.statement()?)
-                };
+                let init = if self.is_sym(";") { None } else { Some(self.statement()?) };
                 self.expect_sym(";")?;
-                let cond = if self.is_sym(";") {
-                    Expr::Num(1.0)
-                } else {
-                    self.expr()?
-                };
+                let cond = if self.is_sym(";") { Expr::Num(1.0) } else { self.expr()? };
                 self.expect_sym(";")?;
-                let step = if self.is_sym(")") {
-                    None
-                } else {
-                    Some(self.expr()?)
-                };
+                let step = if self.is_sym(")") { None } else { Some(self.expr()?) };
                 self.expect_sym(")")?;
                 let body = self.body()?;
-                let looped = Stmt::While {
-                    cond,
-                    body,
-                    step,
-                    pos,
-                };
+                let looped = Stmt::While { cond, body, step, pos };
                 Ok(Stmt::Block(init.into_iter().chain([looped]).collect()))
             }
             "break" => {
@@ -549,19 +454,11 @@ impl Parser {
         };
         let apos = self.bump().1;
         if !matches!(lhs, Expr::Name(..) | Expr::Index(..)) {
-            return Err(SourceError::new(
-                apos,
-                "only a variable, array element or feature can be assigned to",
-            ));
+            return Err(SourceError::new(apos, "only a variable, array element or feature can be assigned to"));
         }
         let value = self.expr()?;
         let _ = pos;
-        Ok(Expr::Assign {
-            target: Box::new(lhs),
-            op,
-            value: Box::new(value),
-            pos: apos,
-        })
+        Ok(Expr::Assign { target: Box::new(lhs), op, value: Box::new(value), pos: apos })
     }
 
     fn ternary(&mut self) -> Result<Expr, SourceError> {
@@ -582,10 +479,7 @@ impl Parser {
     ) -> Result<Expr, SourceError> {
         let mut lhs = next(self)?;
         loop {
-            let op = ops
-                .iter()
-                .find(|(w, _)| self.is_sym(w) || self.is_word(w))
-                .map(|(_, op)| *op);
+            let op = ops.iter().find(|(w, _)| self.is_sym(w) || self.is_word(w)).map(|(_, op)| *op);
             let Some(op) = op else { return Ok(lhs) };
             self.bump();
             let rhs = next(self)?;
@@ -594,25 +488,10 @@ impl Parser {
     }
 
     fn or(&mut self) -> Result<Expr, SourceError> {
-        self.binary_level(
-            Self::and,
-            &[
-                ("or", BinOp::Or),
-                ("|", BinOp::Or),
-                ("xor", BinOp::Xor),
-                ("nor", BinOp::Nor),
-            ],
-        )
+        self.binary_level(Self::and, &[("or", BinOp::Or), ("|", BinOp::Or), ("xor", BinOp::Xor), ("nor", BinOp::Nor)])
     }
     fn and(&mut self) -> Result<Expr, SourceError> {
-        self.binary_level(
-            Self::cmp,
-            &[
-                ("and", BinOp::And),
-                ("&", BinOp::And),
-                ("nand", BinOp::Nand),
-            ],
-        )
+        self.binary_level(Self::cmp, &[("and", BinOp::And), ("&", BinOp::And), ("nand", BinOp::Nand)])
     }
     fn cmp(&mut self) -> Result<Expr, SourceError> {
         self.binary_level(
@@ -633,10 +512,7 @@ impl Parser {
         self.binary_level(Self::product, &[("+", BinOp::Add), ("-", BinOp::Sub)])
     }
     fn product(&mut self) -> Result<Expr, SourceError> {
-        self.binary_level(
-            Self::unary,
-            &[("*", BinOp::Mul), ("/", BinOp::Div), ("%", BinOp::Mod)],
-        )
+        self.binary_level(Self::unary, &[("*", BinOp::Mul), ("/", BinOp::Div), ("%", BinOp::Mod)])
     }
     fn unary(&mut self) -> Result<Expr, SourceError> {
         if self.eat_sym("-") {
@@ -645,12 +521,7 @@ impl Parser {
         if self.eat_sym("+") {
             return self.unary();
         }
-        if self.is_word("not")
-            && !self
-                .tokens
-                .get(self.at + 1)
-                .is_some_and(|t| t.0 == Tok::Sym("("))
-        {
+        if self.is_word("not") && !self.tokens.get(self.at + 1).is_some_and(|t| t.0 == Tok::Sym("(")) {
             self.bump();
             return Ok(Expr::Not(Box::new(self.unary()?)));
         }
@@ -695,10 +566,7 @@ impl Parser {
                 Ok(Expr::Index(name, Box::new(index), pos))
             }
             Tok::Name(name) => Ok(Expr::Name(name, pos)),
-            t => Err(SourceError::new(
-                pos,
-                format!("expected a value but found {t}"),
-            )),
+            t => Err(SourceError::new(pos, format!("expected a value but found {t}"))),
         }
     }
 }
@@ -708,14 +576,7 @@ mod tests {
     use super::*;
 
     fn parse(s: &str) -> Result<Vec<Stmt>, SourceError> {
-        parse_program(
-            s,
-            Pos {
-                line: 1,
-                col: 1,
-                offset: 0,
-            },
-        )
+        parse_program(s, Pos { line: 1, col: 1, offset: 0 })
     }
 
     #[test]
@@ -726,18 +587,9 @@ mod tests {
         };
         use BinOp::*;
         let n = |x: f64| Box::new(Expr::Num(x));
-        assert_eq!(
-            e("1 + 2 * 3"),
-            Expr::Binary(Add, n(1.0), Box::new(Expr::Binary(Mul, n(2.0), n(3.0))))
-        );
-        assert_eq!(
-            e("2 ^ 3 ^ 2"),
-            Expr::Binary(Pow, n(2.0), Box::new(Expr::Binary(Pow, n(3.0), n(2.0))))
-        );
-        assert_eq!(
-            e("-2 ^ 2"),
-            Expr::Neg(Box::new(Expr::Binary(Pow, n(2.0), n(2.0))))
-        );
+        assert_eq!(e("1 + 2 * 3"), Expr::Binary(Add, n(1.0), Box::new(Expr::Binary(Mul, n(2.0), n(3.0)))));
+        assert_eq!(e("2 ^ 3 ^ 2"), Expr::Binary(Pow, n(2.0), Box::new(Expr::Binary(Pow, n(3.0), n(2.0)))));
+        assert_eq!(e("-2 ^ 2"), Expr::Neg(Box::new(Expr::Binary(Pow, n(2.0), n(2.0)))));
         assert!(matches!(e("1 < 2 and 3 > 2 or 0"), Expr::Binary(Or, _, _)));
         assert!(matches!(e("1 ? 2 : 3"), Expr::Ternary(..)));
     }
@@ -749,22 +601,13 @@ mod tests {
         assert_eq!(err.message, "expected ')' but found ';'");
         let shown = err.render("s.expr", "var x := 1;\nvar y := (x + 2;\n");
         assert!(shown.starts_with("s.expr:2:16: expected ')'"), "{shown}");
-        assert!(
-            shown.ends_with("    var y := (x + 2;\n                   ^"),
-            "{shown}"
-        );
-        assert_eq!(
-            parse("x := 1 $ 2").unwrap_err().message,
-            "unexpected character '$'"
-        );
+        assert!(shown.ends_with("    var y := (x + 2;\n                   ^"), "{shown}");
+        assert_eq!(parse("x := 1 $ 2").unwrap_err().message, "unexpected character '$'");
         assert_eq!(
             parse("1 := 2").unwrap_err().message,
             "only a variable, array element or feature can be assigned to"
         );
-        assert!(parse("x := 1 y := 2")
-            .unwrap_err()
-            .message
-            .contains("expected ';'"));
+        assert!(parse("x := 1 y := 2").unwrap_err().message.contains("expected ';'"));
     }
 
     #[test]
@@ -776,10 +619,7 @@ mod tests {
             &parse("if (x) { y := 1 } else if (z) { y := 2 } else { y := 3 }").unwrap()[0],
             Stmt::If { .. }
         ));
-        assert!(matches!(
-            &parse("y := if(x, 1, 2)").unwrap()[0],
-            Stmt::Expr(Expr::Assign { .. })
-        ));
+        assert!(matches!(&parse("y := if(x, 1, 2)").unwrap()[0], Stmt::Expr(Expr::Assign { .. })));
         assert!(
             matches!(&parse("for (var i := 0; i < 3; i += 1) { x += i; }").unwrap()[0], Stmt::Block(b) if b.len() == 2)
         );

@@ -32,26 +32,14 @@ fn repo_root() -> PathBuf {
 }
 
 /// Runs `techniques` one after another against `scene_file`, each in its own session.
-fn sessions<T: Send + 'static>(
-    scene_file: &Path,
-    log: &Path,
-    runs: Vec<(u64, Technique<T>)>,
-) -> Vec<(RunOutcome, T)> {
-    let argv = vec![
-        RENDERER.to_string(),
-        scene_file.to_string_lossy().into_owned(),
-    ];
+fn sessions<T: Send + 'static>(scene_file: &Path, log: &Path, runs: Vec<(u64, Technique<T>)>) -> Vec<(RunOutcome, T)> {
+    let argv = vec![RENDERER.to_string(), scene_file.to_string_lossy().into_owned()];
     let mut runner = SceneRunner::new(argv, Some(log.to_path_buf()), Limits::default()).unwrap();
     let mut out = Vec::new();
     for (spp, technique) in runs {
         let dir = runner.dir().to_path_buf();
-        let client =
-            std::thread::spawn(move || technique(BenchmarkClient::connect_to(&dir).unwrap()));
-        let outcome = runner.run(
-            spp,
-            &TechniqueLaunch::External,
-            &log.with_extension("technique"),
-        );
+        let client = std::thread::spawn(move || technique(BenchmarkClient::connect_to(&dir).unwrap()));
+        let outcome = runner.run(spp, &TechniqueLaunch::External, &log.with_extension("technique"));
         out.push((outcome, client.join().unwrap()));
     }
     out
@@ -60,18 +48,8 @@ fn sessions<T: Send + 'static>(
 /// A box filter as a closure technique.
 fn box_filter(mut client: BenchmarkClient) -> Vec<f32> {
     let info = client.scene_info().clone();
-    let (w, spp) = (
-        info.get::<i64>("width").unwrap() as usize,
-        info.get::<i64>("max_spp").unwrap() as u64,
-    );
-    client
-        .set_sample_layout(
-            &SampleLayout::new()
-                .with("COLOR_R")
-                .with("COLOR_G")
-                .with("COLOR_B"),
-        )
-        .unwrap();
+    let (w, spp) = (info.get::<i64>("width").unwrap() as usize, info.get::<i64>("max_spp").unwrap() as u64);
+    client.set_sample_layout(&SampleLayout::new().with("COLOR_R").with("COLOR_G").with("COLOR_B")).unwrap();
     let mut sums = vec![0f64; client.result_buffer().len()];
     client
         .evaluate_samples(Spp(spp), |tile| {
@@ -79,8 +57,7 @@ fn box_filter(mut client: BenchmarkClient) -> Vec<f32> {
                 for x in tile.begin_x()..tile.end_x() {
                     for s in 0..tile.spp() {
                         for c in 0..3 {
-                            sums[(y as usize * w + x as usize) * 3 + c] +=
-                                tile.sample(x, y, s)[c] as f64;
+                            sums[(y as usize * w + x as usize) * 3 + c] += tile.sample(x, y, s)[c] as f64;
                         }
                     }
                 }
@@ -94,28 +71,17 @@ fn box_filter(mut client: BenchmarkClient) -> Vec<f32> {
 }
 
 fn rmse(a: &[f32], b: &[f32]) -> f64 {
-    (a.iter()
-        .zip(b)
-        .map(|(x, y)| ((x - y) as f64).powi(2))
-        .sum::<f64>()
-        / a.len() as f64)
-        .sqrt()
+    (a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
 }
 
 #[test]
 fn listing_c1_unchanged_renders_and_converges_to_its_closed_form() {
     let file = repo_root().join("scenes/experimental/sphere/sphere.expr");
-    assert_eq!(
-        std::fs::read_to_string(&file).unwrap(),
-        LISTING_C1,
-        "the scene file is listing C.1 unchanged"
-    );
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), LISTING_C1, "the scene file is listing C.1 unchanged");
     let reference = closed_form("sphere_time", &Scene::load(&file).unwrap(), 64).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let runs: Vec<(u64, Technique<Vec<f32>>)> = [1, 4, 16, 64]
-        .into_iter()
-        .map(|spp| (spp, Box::new(box_filter) as Box<_>))
-        .collect();
+    let runs: Vec<(u64, Technique<Vec<f32>>)> =
+        [1, 4, 16, 64].into_iter().map(|spp| (spp, Box::new(box_filter) as Box<_>)).collect();
     let results = sessions(&file, &dir.path().join("log"), runs);
     let errors: Vec<f64> = results
         .iter()
@@ -138,39 +104,20 @@ fn input_parameters_are_used_as_given() {
     std::fs::write(&file, "width := 8;\nheight := 4;\n#\nCOLOR_R := IMAGE_X; COLOR_G := IMAGE_Y; COLOR_B := TIME;\nDEPTH := LENS_U + 10 * LENS_V; NORMAL_X := LIGHT_X; NORMAL_Y := LIGHT_Y;\n").unwrap();
     let mine = |i: usize, x: u32, y: u32| -> [f32; 7] {
         let u = |k: usize| ((i * 7 + k * 3) % 11) as f32 / 11.0;
-        [
-            x as f32 + u(0),
-            y as f32 + u(1),
-            u(2),
-            u(3),
-            u(4),
-            u(5),
-            u(6),
-        ]
+        [x as f32 + u(0), y as f32 + u(1), u(2), u(3), u(4), u(5), u(6)]
     };
     let technique = move |mut client: BenchmarkClient| -> usize {
         let mut layout = SampleLayout::new();
-        for p in [
-            "IMAGE_X", "IMAGE_Y", "LENS_U", "LENS_V", "TIME", "LIGHT_X", "LIGHT_Y",
-        ] {
+        for p in ["IMAGE_X", "IMAGE_Y", "LENS_U", "LENS_V", "TIME", "LIGHT_X", "LIGHT_Y"] {
             layout = layout.with_io(p, ElementIo::Input);
         }
-        let layout = layout
-            .with("COLOR_R")
-            .with("COLOR_G")
-            .with("COLOR_B")
-            .with("DEPTH")
-            .with("NORMAL_X")
-            .with("NORMAL_Y");
+        let layout =
+            layout.with("COLOR_R").with("COLOR_G").with("COLOR_B").with("DEPTH").with("NORMAL_X").with("NORMAL_Y");
         client.set_sample_layout(&layout).unwrap();
         let check = |s: &[f32]| {
             // The program computes in f64 and delivers f32.
             let depth = (s[2] as f64 + 10.0 * s[3] as f64) as f32;
-            assert_eq!(
-                &s[7..],
-                &[s[0], s[1], s[4], depth, s[5], s[6]],
-                "features follow the given inputs"
-            );
+            assert_eq!(&s[7..], &[s[0], s[1], s[4], depth, s[5], s[6]], "features follow the given inputs");
         };
         let mut checked = 0;
         client
@@ -180,8 +127,7 @@ fn input_parameters_are_used_as_given() {
                     for y in tile.begin_y()..tile.end_y() {
                         for x in tile.begin_x()..tile.end_x() {
                             for s in 0..tile.spp() {
-                                tile.sample_mut(x, y, s)[..7]
-                                    .copy_from_slice(&mine(s as usize, x, y));
+                                tile.sample_mut(x, y, s)[..7].copy_from_slice(&mine(s as usize, x, y));
                             }
                         }
                     }
@@ -223,17 +169,8 @@ fn input_parameters_are_used_as_given() {
         client.send_result().unwrap();
         checked
     };
-    let results = sessions(
-        &file,
-        &dir.path().join("log"),
-        vec![(3, Box::new(technique))],
-    );
-    assert_eq!(
-        results[0].0.status,
-        RunStatus::Ok,
-        "{}",
-        results[0].0.message
-    );
+    let results = sessions(&file, &dir.path().join("log"), vec![(3, Box::new(technique))]);
+    assert_eq!(results[0].0.status, RunStatus::Ok, "{}", results[0].0.message);
     assert_eq!(results[0].1, 2 * 32 + 30);
 }
 
@@ -241,31 +178,22 @@ fn input_parameters_are_used_as_given() {
 fn the_same_requests_give_the_same_samples() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("noise.expr");
-    std::fs::write(&file, "width := 9;\nheight := 7;\n#\nCOLOR_R := sin(IMAGE_X * 3) * LENS_U + TIME * LIGHT_Y;\nDEPTH := LENS_V;\n").unwrap();
+    std::fs::write(
+        &file,
+        "width := 9;\nheight := 7;\n#\nCOLOR_R := sin(IMAGE_X * 3) * LENS_U + TIME * LIGHT_Y;\nDEPTH := LENS_V;\n",
+    )
+    .unwrap();
     let collect = |mut client: BenchmarkClient| -> Vec<u32> {
         client
-            .set_sample_layout(
-                &SampleLayout::new()
-                    .with("IMAGE_X")
-                    .with("IMAGE_Y")
-                    .with("COLOR_R")
-                    .with("DEPTH"),
-            )
+            .set_sample_layout(&SampleLayout::new().with("IMAGE_X").with("IMAGE_Y").with("COLOR_R").with("DEPTH"))
             .unwrap();
         let mut bits = Vec::new();
-        client
-            .evaluate_samples(Spp(3), |t| {
-                bits.extend(t.data().iter().map(|v| v.to_bits()))
-            })
-            .unwrap();
-        client
-            .evaluate_sample_count(100, |d| bits.extend(d.iter().map(|v| v.to_bits())))
-            .unwrap();
+        client.evaluate_samples(Spp(3), |t| bits.extend(t.data().iter().map(|v| v.to_bits()))).unwrap();
+        client.evaluate_sample_count(100, |d| bits.extend(d.iter().map(|v| v.to_bits()))).unwrap();
         client.send_result().unwrap();
         bits
     };
-    let runs: Vec<(u64, Technique<Vec<u32>>)> =
-        vec![(5, Box::new(collect)), (5, Box::new(collect))];
+    let runs: Vec<(u64, Technique<Vec<u32>>)> = vec![(5, Box::new(collect)), (5, Box::new(collect))];
     let results = sessions(&file, &dir.path().join("log"), runs);
     assert_eq!(results[0].1.len(), (3 * 63 + 100) * 4);
     // Tiles may arrive in any order; the multiset of samples is what must repeat.
@@ -281,62 +209,42 @@ fn the_same_requests_give_the_same_samples() {
 fn nan_samples_are_delivered_and_reported_in_the_renderer_log() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("nan.expr");
-    std::fs::write(&file, "width := 6;\nheight := 2;\n#\nCOLOR_R := IMAGE_X < 1 ? 0 / 0 : 1;\nCOLOR_G := 1 / (IMAGE_Y - IMAGE_Y);\n").unwrap();
-    let log = dir.path().join("renderer.log");
-    let results = sessions(
+    std::fs::write(
         &file,
-        &log,
-        vec![(2, Box::new(box_filter) as Technique<Vec<f32>>)],
-    );
+        "width := 6;\nheight := 2;\n#\nCOLOR_R := IMAGE_X < 1 ? 0 / 0 : 1;\nCOLOR_G := 1 / (IMAGE_Y - IMAGE_Y);\n",
+    )
+    .unwrap();
+    let log = dir.path().join("renderer.log");
+    let results = sessions(&file, &log, vec![(2, Box::new(box_filter) as Technique<Vec<f32>>)]);
     let (outcome, image) = &results[0];
     assert!(image[0].is_nan() && image[3] == 1.0 && image[1].is_infinite());
-    assert_eq!(
-        outcome.status,
-        RunStatus::InvalidOutput,
-        "{}",
-        outcome.message
-    );
+    assert_eq!(outcome.status, RunStatus::InvalidOutput, "{}", outcome.message);
     let log = std::fs::read_to_string(&log).unwrap();
-    assert!(log.contains("nan.expr: warning: 28 NaN or infinite values in request 0; first: COLOR_R = NaN at pixel (0, 0) sample 0"), "{log}");
+    assert!(
+        log.contains(
+            "nan.expr: warning: 28 NaN or infinite values in request 0; first: COLOR_R = NaN at pixel (0, 0) sample 0"
+        ),
+        "{log}"
+    );
 }
 
 #[test]
 fn an_endless_loop_fails_the_run_with_the_scene_position() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("loop.expr");
-    std::fs::write(
-        &file,
-        "width := 2;\nheight := 2;\n#\nvar i := 0;\nwhile (1) { i += 1 };\nCOLOR_R := i;\n",
-    )
-    .unwrap();
+    std::fs::write(&file, "width := 2;\nheight := 2;\n#\nvar i := 0;\nwhile (1) { i += 1 };\nCOLOR_R := i;\n").unwrap();
     let technique = |mut client: BenchmarkClient| {
-        client
-            .set_sample_layout(&SampleLayout::new().with("COLOR_R"))
-            .unwrap();
-        client
-            .evaluate_samples(Spp(1), |_| {})
-            .unwrap_err()
-            .to_string()
+        client.set_sample_layout(&SampleLayout::new().with("COLOR_R")).unwrap();
+        client.evaluate_samples(Spp(1), |_| {}).unwrap_err().to_string()
     };
-    let results = sessions(
-        &file,
-        &dir.path().join("log"),
-        vec![(1, Box::new(technique))],
-    );
+    let results = sessions(&file, &dir.path().join("log"), vec![(1, Box::new(technique))]);
     assert_eq!(results[0].0.status, RunStatus::RendererFailed);
     assert!(
-        results[0]
-            .0
-            .message
-            .contains("loop.expr:5:1: loop ran more than 10000000 times"),
+        results[0].0.message.contains("loop.expr:5:1: loop ran more than 10000000 times"),
         "{}",
         results[0].0.message
     );
-    assert!(
-        results[0].1.contains("loop.expr:5:1"),
-        "the technique is told too: {}",
-        results[0].1
-    );
+    assert!(results[0].1.contains("loop.expr:5:1"), "the technique is told too: {}", results[0].1);
 }
 
 #[test]
@@ -346,21 +254,11 @@ fn every_experimental_scene_loads_and_matches_its_metadata() {
     for entry in std::fs::read_dir(&root).unwrap() {
         let meta = fbksd_manager::scenes::SceneMeta::load(&entry.unwrap().path()).unwrap();
         let scene = Scene::load(&meta.scene_file()).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(
-            (scene.width, scene.height),
-            (meta.width, meta.height),
-            "{}",
-            meta.name
-        );
+        assert_eq!((scene.width, scene.height), (meta.width, meta.height), "{}", meta.name);
         assert_eq!(meta.renderer, "procedural");
         assert_eq!(meta.category, "experimental");
         let info = scene.info();
-        assert_eq!(
-            info.get::<bool>("has_dof").unwrap(),
-            meta.tags.iter().any(|t| t == "dof"),
-            "{}",
-            meta.name
-        );
+        assert_eq!(info.get::<bool>("has_dof").unwrap(), meta.tags.iter().any(|t| t == "dof"), "{}", meta.name);
         assert_eq!(
             info.get::<bool>("has_motion_blur").unwrap(),
             meta.tags.iter().any(|t| t == "motion-blur"),
@@ -372,15 +270,7 @@ fn every_experimental_scene_loads_and_matches_its_metadata() {
     names.sort();
     assert_eq!(
         names,
-        [
-            "black-ring",
-            "defocus-checkerboard",
-            "fireflies",
-            "mandelbrot",
-            "moving-bars",
-            "sin-bands",
-            "sphere"
-        ]
+        ["black-ring", "defocus-checkerboard", "fireflies", "mandelbrot", "moving-bars", "sin-bands", "sphere"]
     );
 }
 
@@ -389,15 +279,9 @@ fn the_fireflies_closed_form_is_the_scene_expectation() {
     // Cross-checks the Rust formula against the scene program. At the
     // scene's own resolution the hit probability is nearly constant within
     // a pixel, so 256 spp pin the mean to about ±0.6% (seen over 6 seeds).
-    let scene =
-        Scene::load(&repo_root().join("scenes/experimental/fireflies/fireflies.expr")).unwrap();
+    let scene = Scene::load(&repo_root().join("scenes/experimental/fireflies/fireflies.expr")).unwrap();
     let exact = closed_form("fireflies", &scene, 16).unwrap();
     let rendered = fbksd_procedural::render::render_image(&scene, 256, 0).unwrap();
     let mean = |v: &[f32]| v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64;
-    assert!(
-        (mean(&rendered) - mean(&exact)).abs() < 0.025 * mean(&exact),
-        "{} vs {}",
-        mean(&rendered),
-        mean(&exact)
-    );
+    assert!((mean(&rendered) - mean(&exact)).abs() < 0.025 * mean(&exact), "{} vs {}", mean(&rendered), mean(&exact));
 }

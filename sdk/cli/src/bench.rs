@@ -60,9 +60,8 @@ fn sibling_or_path(name: &str, given: Option<PathBuf>) -> anyhow::Result<PathBuf
         .flat_map(|p| std::env::split_paths(&p).collect::<Vec<_>>())
         .map(|d| d.join(name))
         .find(|p| p.is_file());
-    on_path.with_context(|| {
-        format!("cannot find {name}: build it (cargo build --release --workspace) or pass its path")
-    })
+    on_path
+        .with_context(|| format!("cannot find {name}: build it (cargo build --release --workspace) or pass its path"))
 }
 
 /// Best of several single-thread copies of 256 MiB, in bytes per second.
@@ -88,28 +87,17 @@ fn transport(args: TransportArgs) -> anyhow::Result<()> {
     let scene = work.path().join("transport.json");
     std::fs::write(
         &scene,
-        format!(
-            r#"{{"width": {}, "height": {}, "pattern": "constant", "tile_size": 16}}"#,
-            args.width, args.height
-        ),
+        format!(r#"{{"width": {}, "height": {}, "pattern": "constant", "tile_size": 16}}"#, args.width, args.height),
     )?;
     // The technique inherits this and asks for 14 floats per sample.
     std::env::set_var("FBKSD_BOX_EXTRA_FEATURES", "1");
 
     let log = work.path().join("renderer.log");
     let argv = |p: &Path| p.to_string_lossy().into_owned();
-    let mut runner = SceneRunner::new(
-        vec![argv(&renderer), argv(&scene)],
-        Some(log.clone()),
-        Limits::default(),
-    )?;
+    let mut runner = SceneRunner::new(vec![argv(&renderer), argv(&scene)], Some(log.clone()), Limits::default())?;
     let technique_log = work.path().join("technique.log");
     let started = Instant::now();
-    let outcome = runner.run(
-        args.spp,
-        &TechniqueLaunch::Command(vec![argv(&technique)]),
-        &technique_log,
-    );
+    let outcome = runner.run(args.spp, &TechniqueLaunch::Command(vec![argv(&technique)]), &technique_log);
     let wall = started.elapsed();
     if outcome.status != RunStatus::Ok {
         bail!(
@@ -124,10 +112,7 @@ fn transport(args: TransportArgs) -> anyhow::Result<()> {
     // Measured last: Linux carries a forked child's pre-exec peak RSS into
     // its ru_maxrss, so the 512 MiB touched here must not precede the run.
     let memcpy = memcpy_bandwidth();
-    println!(
-        "memcpy (1 thread, 256 MiB):         {:6.2} GB/s",
-        memcpy / 1e9
-    );
+    println!("memcpy (1 thread, 256 MiB):         {:6.2} GB/s", memcpy / 1e9);
     let bytes = outcome.used_samples as f64 * SAMPLE_FLOATS as f64 * 4.0;
     let transport = bytes / (outcome.times.render_ms / 1e3);
     println!(
@@ -138,29 +123,19 @@ fn transport(args: TransportArgs) -> anyhow::Result<()> {
         SAMPLE_FLOATS,
         bytes / 1e9
     );
-    println!(
-        "  throughput (request → last tile):  {:6.2} GB/s  = {:.2} × memcpy",
-        transport / 1e9,
-        transport / memcpy
-    );
+    println!("  throughput (request → last tile):  {:6.2} GB/s  = {:.2} × memcpy", transport / 1e9, transport / memcpy);
     println!(
         "  whole run incl. start-up:          {:6.2} GB/s  ({:.2} s)",
         bytes / wall.as_secs_f64() / 1e9,
         wall.as_secs_f64()
     );
-    println!(
-        "  technique time (excl. waiting):    {:8.1} ms",
-        outcome.times.technique_ms
-    );
+    println!("  technique time (excl. waiting):    {:8.1} ms", outcome.times.technique_ms);
     println!("peak RSS:");
     println!("  manager:   {:7.1} MB", manager_peak as f64 / 1e6);
     match renderer_exit {
         Some(r) => println!("  renderer:  {:7.1} MB", r.peak_rss as f64 / 1e6),
         None => println!("  renderer:  unknown (did not exit in time)"),
     }
-    println!(
-        "  technique: {:7.1} MB",
-        outcome.peak_memory_bytes as f64 / 1e6
-    );
+    println!("  technique: {:7.1} MB", outcome.peak_memory_bytes as f64 / 1e6);
     Ok(())
 }

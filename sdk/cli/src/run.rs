@@ -36,33 +36,21 @@ pub struct RunArgs {
 fn technique_spec(arg: &str) -> anyhow::Result<TechniqueSpec> {
     // NAME=COMMAND when the part before '=' is a plain name with no blanks.
     let (name, command) = match arg.split_once('=') {
-        Some((n, c))
-            if !n.is_empty()
-                && n.chars()
-                    .all(|ch| ch.is_ascii_alphanumeric() || "-_.".contains(ch)) =>
-        {
+        Some((n, c)) if !n.is_empty() && n.chars().all(|ch| ch.is_ascii_alphanumeric() || "-_.".contains(ch)) => {
             (Some(n.to_string()), c)
         }
         _ => (None, arg),
     };
     let argv = shell_words::split(command).with_context(|| format!("--technique {arg:?}"))?;
-    let Some(program) = argv.first() else {
-        bail!("--technique {arg:?} has no command")
-    };
+    let Some(program) = argv.first() else { bail!("--technique {arg:?} has no command") };
     let name = name.unwrap_or_else(|| {
-        PathBuf::from(program)
-            .file_stem()
-            .map_or("technique".into(), |s| s.to_string_lossy().into_owned())
+        PathBuf::from(program).file_stem().map_or("technique".into(), |s| s.to_string_lossy().into_owned())
     });
     Ok(TechniqueSpec { name, argv })
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    let techniques = args
-        .techniques
-        .iter()
-        .map(|t| technique_spec(t))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let techniques = args.techniques.iter().map(|t| technique_spec(t)).collect::<anyhow::Result<Vec<_>>>()?;
     if args.spp.contains(&0) {
         bail!("--spp takes positive budgets, e.g. --spp 1,4,16");
     }
@@ -84,53 +72,27 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             let file = std::fs::canonicalize(meta.scene_file())
                 .with_context(|| format!("scene {}: {}", meta.name, meta.scene_file().display()))?;
             let renderer_argv = vec![program, file.to_string_lossy().into_owned()];
-            let spps = if args.spp.is_empty() {
-                meta.spp.clone()
-            } else {
-                args.spp.clone()
-            };
-            scenes.push(SceneSpec {
-                name: meta.name,
-                renderer_argv,
-                spps,
-            });
+            let spps = if args.spp.is_empty() { meta.spp.clone() } else { args.spp.clone() };
+            scenes.push(SceneSpec { name: meta.name, renderer_argv, spps });
             continue;
         }
         if !path.is_file() {
-            bail!("scene {} does not exist (give a scene directory, its fbksd-scene.json, or a scene file)", path.display());
-        }
-        let Some(renderer) = &renderer else {
             bail!(
-                "scene file {} has no metadata: say which renderer loads it with --renderer",
+                "scene {} does not exist (give a scene directory, its fbksd-scene.json, or a scene file)",
                 path.display()
             );
+        }
+        let Some(renderer) = &renderer else {
+            bail!("scene file {} has no metadata: say which renderer loads it with --renderer", path.display());
         };
         let mut renderer_argv = renderer.clone();
         renderer_argv.push(std::fs::canonicalize(path)?.to_string_lossy().into_owned());
-        let name = path
-            .file_stem()
-            .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
-        let spps = if args.spp.is_empty() {
-            vec![1, 4, 16]
-        } else {
-            args.spp.clone()
-        };
-        scenes.push(SceneSpec {
-            name,
-            renderer_argv,
-            spps,
-        });
+        let name = path.file_stem().map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+        let spps = if args.spp.is_empty() { vec![1, 4, 16] } else { args.spp.clone() };
+        scenes.push(SceneSpec { name, renderer_argv, spps });
     }
-    let limits = Limits {
-        time_limit: (!args.time_limit.is_zero()).then_some(args.time_limit),
-        ..Limits::default()
-    };
-    let benchmark = Benchmark {
-        techniques,
-        scenes,
-        results: args.results.clone(),
-        limits,
-    };
+    let limits = Limits { time_limit: (!args.time_limit.is_zero()).then_some(args.time_limit), ..Limits::default() };
+    let benchmark = Benchmark { techniques, scenes, results: args.results.clone(), limits };
     let live = std::io::stderr().is_terminal();
     let records = benchmark.run(|p| report(p, live))?;
     print_summary(&records);
@@ -147,11 +109,7 @@ fn renderer_program(name: &str) -> anyhow::Result<String> {
     let candidates = [format!("fbksd-{name}"), format!("fbksd-{name}-renderer")];
     let here = std::env::current_exe()?;
     let path = std::env::var_os("PATH").unwrap_or_default();
-    let dirs = here
-        .parent()
-        .map(PathBuf::from)
-        .into_iter()
-        .chain(std::env::split_paths(&path));
+    let dirs = here.parent().map(PathBuf::from).into_iter().chain(std::env::split_paths(&path));
     for dir in dirs {
         for c in &candidates {
             let p = dir.join(c);
@@ -160,55 +118,29 @@ fn renderer_program(name: &str) -> anyhow::Result<String> {
             }
         }
     }
-    bail!(
-        "no program for renderer {name:?}: looked for {} next to fbksd and on PATH",
-        candidates.join(" and ")
-    )
+    bail!("no program for renderer {name:?}: looked for {} next to fbksd and on PATH", candidates.join(" and "))
 }
 
 fn report(progress: Progress<'_>, live: bool) {
     match progress {
-        Progress::RunStarted {
-            scene,
-            technique,
-            spp,
-        } => eprintln!("▶ {scene} · {technique} · {spp} spp"),
+        Progress::RunStarted { scene, technique, spp } => eprintln!("▶ {scene} · {technique} · {spp} spp"),
         Progress::Samples { delivered, budget } if live => {
-            eprint!(
-                "\r  {delivered} / {budget} samples ({:.0}%)   ",
-                delivered as f64 * 100.0 / budget.max(1) as f64
-            )
+            eprint!("\r  {delivered} / {budget} samples ({:.0}%)   ", delivered as f64 * 100.0 / budget.max(1) as f64)
         }
         Progress::Samples { .. } => {}
         Progress::RunFinished(r) => {
             if live {
                 eprint!("\r\x1b[K");
             }
-            let what = if r.status == RunStatus::Ok {
-                "ok".to_string()
-            } else {
-                format!("{}: {}", r.status, r.message)
-            };
-            eprintln!(
-                "  {what} ({:.1} ms technique, {:.1} ms render)",
-                r.times.technique_ms, r.times.render_ms
-            );
+            let what =
+                if r.status == RunStatus::Ok { "ok".to_string() } else { format!("{}: {}", r.status, r.message) };
+            eprintln!("  {what} ({:.1} ms technique, {:.1} ms render)", r.times.technique_ms, r.times.render_ms);
         }
     }
 }
 
 fn print_summary(records: &[RunRecord]) {
-    let header = [
-        "scene",
-        "technique",
-        "spp",
-        "status",
-        "technique ms",
-        "render ms",
-        "wall ms",
-        "samples",
-        "peak MB",
-    ];
+    let header = ["scene", "technique", "spp", "status", "technique ms", "render ms", "wall ms", "samples", "peak MB"];
     let rows: Vec<[String; 9]> = records
         .iter()
         .map(|r| {
@@ -226,23 +158,10 @@ fn print_summary(records: &[RunRecord]) {
         })
         .collect();
     let widths: Vec<usize> = (0..header.len())
-        .map(|c| {
-            rows.iter()
-                .map(|r| r[c].chars().count())
-                .chain([header[c].len()])
-                .max()
-                .unwrap()
-        })
+        .map(|c| rows.iter().map(|r| r[c].chars().count()).chain([header[c].len()]).max().unwrap())
         .collect();
     let line = |cells: Vec<&str>| {
-        cells
-            .iter()
-            .zip(&widths)
-            .map(|(c, w)| format!("{c:<w$}"))
-            .collect::<Vec<_>>()
-            .join("  ")
-            .trim_end()
-            .to_string()
+        cells.iter().zip(&widths).map(|(c, w)| format!("{c:<w$}")).collect::<Vec<_>>().join("  ").trim_end().to_string()
     };
     println!("{}", line(header.to_vec()));
     for r in &rows {

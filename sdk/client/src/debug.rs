@@ -25,16 +25,13 @@ pub(crate) enum DebugArgs {
 
 impl DebugArgs {
     /// `None` when no `--fbksd-*` option is present (normal mode).
-    pub(crate) fn parse(
-        args: impl IntoIterator<Item = String>,
-    ) -> Result<Option<Self>, ClientError> {
+    pub(crate) fn parse(args: impl IntoIterator<Item = String>) -> Result<Option<Self>, ClientError> {
         let mut renderer = None;
         let mut spp = None;
         let mut output = PathBuf::from("fbksd-debug.exr");
         let mut args = args.into_iter().skip(1);
-        let value = |name: &str, v: Option<String>| {
-            v.ok_or_else(|| ClientError::Debug(format!("{name} needs a value")))
-        };
+        let value =
+            |name: &str, v: Option<String>| v.ok_or_else(|| ClientError::Debug(format!("{name} needs a value")));
         while let Some(arg) = args.next() {
             match arg.as_str() {
                 "--fbksd-version" => return Ok(Some(DebugArgs::Version)),
@@ -42,9 +39,7 @@ impl DebugArgs {
                 "--fbksd-spp" => {
                     let v = value("--fbksd-spp", args.next())?;
                     spp = Some(v.parse::<u64>().ok().filter(|n| *n > 0).ok_or_else(|| {
-                        ClientError::Debug(format!(
-                            "--fbksd-spp takes a positive whole number, got {v:?}"
-                        ))
+                        ClientError::Debug(format!("--fbksd-spp takes a positive whole number, got {v:?}"))
                     })?);
                 }
                 "--fbksd-output" => output = PathBuf::from(value("--fbksd-output", args.next())?),
@@ -54,23 +49,15 @@ impl DebugArgs {
         match (renderer, spp) {
             (None, None) => Ok(None),
             (Some(r), Some(spp)) => {
-                let renderer = shell_words::split(&r)
-                    .map_err(|e| ClientError::Debug(format!("--fbksd-renderer {r:?}: {e}")))?;
+                let renderer =
+                    shell_words::split(&r).map_err(|e| ClientError::Debug(format!("--fbksd-renderer {r:?}: {e}")))?;
                 if renderer.is_empty() {
                     return Err(ClientError::Debug("--fbksd-renderer is empty".into()));
                 }
-                Ok(Some(DebugArgs::Run(RunArgs {
-                    renderer,
-                    spp,
-                    output,
-                })))
+                Ok(Some(DebugArgs::Run(RunArgs { renderer, spp, output })))
             }
-            (Some(_), None) => Err(ClientError::Debug(
-                "--fbksd-renderer needs --fbksd-spp".into(),
-            )),
-            (None, Some(_)) => Err(ClientError::Debug(
-                "--fbksd-spp needs --fbksd-renderer".into(),
-            )),
+            (Some(_), None) => Err(ClientError::Debug("--fbksd-renderer needs --fbksd-spp".into())),
+            (None, Some(_)) => Err(ClientError::Debug("--fbksd-spp needs --fbksd-renderer".into())),
         }
     }
 }
@@ -82,20 +69,14 @@ pub(crate) struct DebugManager {
 
 impl DebugManager {
     pub(crate) fn start(args: RunArgs) -> Result<Self, ClientError> {
-        let limits = Limits {
-            time_limit: None,
-            ..Limits::default()
-        };
+        let limits = Limits { time_limit: None, ..Limits::default() };
         let mut runner = SceneRunner::new(args.renderer, None, limits)?;
         let dir = runner.dir().to_path_buf();
-        let thread = std::thread::Builder::new()
-            .name("fbksd-debug-manager".into())
-            .spawn(move || {
-                let outcome =
-                    runner.run(args.spp, &TechniqueLaunch::External, Path::new("/dev/null"));
-                report(&outcome, &args.output);
-                let _ = runner.finish();
-            })?;
+        let thread = std::thread::Builder::new().name("fbksd-debug-manager".into()).spawn(move || {
+            let outcome = runner.run(args.spp, &TechniqueLaunch::External, Path::new("/dev/null"));
+            report(&outcome, &args.output);
+            let _ = runner.finish();
+        })?;
         Ok(DebugManager { dir, thread })
     }
 

@@ -45,9 +45,7 @@ pub use fbksd_core::{Feature, RandomParameter, SceneInfo};
 pub use tile::{BufferTile, BufferTileMut};
 
 use fbksd_core::layout::{CompiledLayout, LayoutError};
-use fbksd_core::protocol::{
-    read_frame, write_frame, Amount, FrameError, FromTechnique, Hello, Role, ToTechnique,
-};
+use fbksd_core::protocol::{read_frame, write_frame, Amount, FrameError, FromTechnique, Hello, Role, ToTechnique};
 use fbksd_core::scene_info::{keys, SceneInfoError};
 use fbksd_core::shm::{plain_file_name, Ring, SharedRegion, ShmError};
 use fbksd_core::{rendezvous, Tile};
@@ -127,11 +125,7 @@ impl BenchmarkClient {
     pub fn from_args(args: impl IntoIterator<Item = String>) -> Result<Self, ClientError> {
         match debug::DebugArgs::parse(args)? {
             Some(debug::DebugArgs::Version) => {
-                println!(
-                    "fbksd {} (protocol {})",
-                    env!("CARGO_PKG_VERSION"),
-                    fbksd_core::protocol::PROTOCOL_VERSION
-                );
+                println!("fbksd {} (protocol {})", env!("CARGO_PKG_VERSION"), fbksd_core::protocol::PROTOCOL_VERSION);
                 std::process::exit(0);
             }
             Some(debug::DebugArgs::Run(args)) => {
@@ -156,19 +150,9 @@ impl BenchmarkClient {
         let mut reader = BufReader::new(writer.try_clone()?);
         write_frame(&mut writer, &Hello::new(Role::Technique))?;
         let (scene_info, result_file) = match read_frame::<_, ToTechnique>(&mut reader)? {
-            Some(ToTechnique::Welcome {
-                scene_info,
-                result_file,
-                ..
-            }) => (scene_info, result_file),
-            Some(ToTechnique::Error { kind, message }) => {
-                return Err(ClientError::Refused { kind, message })
-            }
-            Some(other) => {
-                return Err(ClientError::Protocol(format!(
-                    "expected welcome, got {other:?}"
-                )))
-            }
+            Some(ToTechnique::Welcome { scene_info, result_file, .. }) => (scene_info, result_file),
+            Some(ToTechnique::Error { kind, message }) => return Err(ClientError::Refused { kind, message }),
+            Some(other) => return Err(ClientError::Protocol(format!("expected welcome, got {other:?}"))),
             None => return Err(ClientError::Closed),
         };
         let (width, height) = (scene_info.width()?, scene_info.height()?);
@@ -208,25 +192,17 @@ impl BenchmarkClient {
     /// Sets the sample layout; once per run.
     pub fn set_sample_layout(&mut self, layout: &SampleLayout) -> Result<(), ClientError> {
         if self.layout.is_some() {
-            return Err(ClientError::Usage(
-                "set_sample_layout may be called only once".into(),
-            ));
+            return Err(ClientError::Usage("set_sample_layout may be called only once".into()));
         }
         let compiled = layout.compile()?;
-        self.send(&FromTechnique::SetLayout {
-            layout: layout.clone(),
-        })?;
+        self.send(&FromTechnique::SetLayout { layout: layout.clone() })?;
         match self.receive()? {
-            ToTechnique::LayoutSet { ring, sample_size }
-                if sample_size as usize == compiled.sample_size() =>
-            {
+            ToTechnique::LayoutSet { ring, sample_size } if sample_size as usize == compiled.sample_size() => {
                 let ring = Ring::open(&self.dir, ring)?;
                 self.layout = Some((compiled, ring));
                 Ok(())
             }
-            other => Err(ClientError::Protocol(format!(
-                "expected layout_set, got {other:?}"
-            ))),
+            other => Err(ClientError::Protocol(format!("expected layout_set, got {other:?}"))),
         }
     }
 
@@ -239,33 +215,17 @@ impl BenchmarkClient {
     }
 
     /// Requests `spp` samples per pixel; `consumer` sees each tile.
-    pub fn evaluate_samples(
-        &mut self,
-        spp: Spp,
-        mut consumer: impl FnMut(&BufferTile<'_>),
-    ) -> Result<(), ClientError> {
+    pub fn evaluate_samples(&mut self, spp: Spp, mut consumer: impl FnMut(&BufferTile<'_>)) -> Result<(), ClientError> {
         let size = self.sample_size();
-        self.evaluate(
-            Amount::Spp(spp.0),
-            false,
-            &mut |_, _| {},
-            &mut |tile, data| consumer(&BufferTile::new(tile, data, size)),
-        )
+        self.evaluate(Amount::Spp(spp.0), false, &mut |_, _| {}, &mut |tile, data| {
+            consumer(&BufferTile::new(tile, data, size))
+        })
     }
 
     /// Requests `count` samples anywhere in the image; `consumer` gets
     /// chunks of `len / sample_size()` samples each.
-    pub fn evaluate_sample_count(
-        &mut self,
-        count: u64,
-        mut consumer: impl FnMut(&[f32]),
-    ) -> Result<(), ClientError> {
-        self.evaluate(
-            Amount::Samples(count),
-            false,
-            &mut |_, _| {},
-            &mut |_, data| consumer(data),
-        )
+    pub fn evaluate_sample_count(&mut self, count: u64, mut consumer: impl FnMut(&[f32])) -> Result<(), ClientError> {
+        self.evaluate(Amount::Samples(count), false, &mut |_, _| {}, &mut |_, data| consumer(data))
     }
 
     /// Requests `spp` samples per pixel whose INPUT parameters `producer`
@@ -293,12 +253,7 @@ impl BenchmarkClient {
         mut producer: impl FnMut(&mut [f32]),
         mut consumer: impl FnMut(&[f32]),
     ) -> Result<(), ClientError> {
-        self.evaluate(
-            Amount::Samples(count),
-            true,
-            &mut |_, data| producer(data),
-            &mut |_, data| consumer(data),
-        )
+        self.evaluate(Amount::Samples(count), true, &mut |_, data| producer(data), &mut |_, data| consumer(data))
     }
 
     fn evaluate(
@@ -310,9 +265,7 @@ impl BenchmarkClient {
     ) -> Result<(), ClientError> {
         let size = self.sample_size();
         if size == 0 {
-            return Err(ClientError::Usage(
-                "set_sample_layout must come before requesting samples".into(),
-            ));
+            return Err(ClientError::Usage("set_sample_layout must come before requesting samples".into()));
         }
         self.send(&FromTechnique::Evaluate { amount, input })?;
         loop {
@@ -331,11 +284,7 @@ impl BenchmarkClient {
                     self.remaining = remaining;
                     return Ok(());
                 }
-                other => {
-                    return Err(ClientError::Protocol(format!(
-                        "unexpected {other:?} during a request"
-                    )))
-                }
+                other => return Err(ClientError::Protocol(format!("unexpected {other:?} during a request"))),
             }
         }
     }
@@ -346,9 +295,7 @@ impl BenchmarkClient {
         let spec = ring.spec();
         let floats = tile.sample_count() as usize * size;
         if slot >= spec.slot_count || floats as u64 * 4 > spec.slot_bytes {
-            return Err(ClientError::Protocol(format!(
-                "tile {tile:?} in slot {slot} does not fit the ring"
-            )));
+            return Err(ClientError::Protocol(format!("tile {tile:?} in slot {slot} does not fit the ring")));
         }
         // SAFETY: the manager handed this slot to the technique until it answers.
         Ok(unsafe { ring.slot_mut(slot, floats) })
@@ -357,11 +304,7 @@ impl BenchmarkClient {
     /// Sends the result buffer as the final image and ends the run.
     pub fn send_result(mut self) -> Result<(), ClientError> {
         let (width, height) = (self.width, self.height);
-        self.send(&FromTechnique::SendResult {
-            width,
-            height,
-            channels: 3,
-        })?;
+        self.send(&FromTechnique::SendResult { width, height, channels: 3 })?;
         let answer = self.receive();
         if let Some(debug) = self.debug.take() {
             drop(self.writer.shutdown(std::net::Shutdown::Both));
@@ -369,9 +312,7 @@ impl BenchmarkClient {
         }
         match answer? {
             ToTechnique::ResultAccepted => Ok(()),
-            other => Err(ClientError::Protocol(format!(
-                "expected result_accepted, got {other:?}"
-            ))),
+            other => Err(ClientError::Protocol(format!("expected result_accepted, got {other:?}"))),
         }
     }
 
@@ -382,9 +323,7 @@ impl BenchmarkClient {
     /// The next message; a refusal becomes [`ClientError::Refused`].
     fn receive(&mut self) -> Result<ToTechnique, ClientError> {
         match read_frame::<_, ToTechnique>(&mut self.reader)? {
-            Some(ToTechnique::Error { kind, message }) => {
-                Err(ClientError::Refused { kind, message })
-            }
+            Some(ToTechnique::Error { kind, message }) => Err(ClientError::Refused { kind, message }),
             Some(m) => Ok(m),
             None => Err(ClientError::Closed),
         }

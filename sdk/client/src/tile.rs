@@ -15,35 +15,16 @@ struct Geometry {
 impl Geometry {
     fn new(tile: Tile, sample_size: usize) -> Self {
         match tile {
-            Tile::Pixels { rect, spp } => Geometry {
-                rect,
-                spp,
-                count: tile.sample_count(),
-                sample_size,
-            },
-            Tile::Samples { count } => Geometry {
-                rect: TileRect {
-                    x0: 0,
-                    y0: 0,
-                    x1: 0,
-                    y1: 0,
-                },
-                spp: 0,
-                count,
-                sample_size,
-            },
+            Tile::Pixels { rect, spp } => Geometry { rect, spp, count: tile.sample_count(), sample_size },
+            Tile::Samples { count } => {
+                Geometry { rect: TileRect { x0: 0, y0: 0, x1: 0, y1: 0 }, spp: 0, count, sample_size }
+            }
         }
     }
 
     #[inline]
     fn range(&self, x: u32, y: u32, s: u32) -> std::ops::Range<usize> {
-        debug_assert!(
-            x >= self.rect.x0
-                && x < self.rect.x1
-                && y >= self.rect.y0
-                && y < self.rect.y1
-                && s < self.spp
-        );
+        debug_assert!(x >= self.rect.x0 && x < self.rect.x1 && y >= self.rect.y0 && y < self.rect.y1 && s < self.spp);
         let start = Tile::sample_index(&self.rect, self.spp, x, y, s) * self.sample_size;
         start..start + self.sample_size
     }
@@ -94,10 +75,7 @@ pub struct BufferTile<'a> {
 
 impl<'a> BufferTile<'a> {
     pub(crate) fn new(tile: Tile, data: &'a [f32], sample_size: usize) -> Self {
-        BufferTile {
-            g: Geometry::new(tile, sample_size),
-            data,
-        }
+        BufferTile { g: Geometry::new(tile, sample_size), data }
     }
 
     geometry_accessors!();
@@ -122,10 +100,7 @@ pub struct BufferTileMut<'a> {
 
 impl<'a> BufferTileMut<'a> {
     pub(crate) fn new(tile: Tile, data: &'a mut [f32], sample_size: usize) -> Self {
-        BufferTileMut {
-            g: Geometry::new(tile, sample_size),
-            data,
-        }
+        BufferTileMut { g: Geometry::new(tile, sample_size), data }
     }
 
     geometry_accessors!();

@@ -151,15 +151,7 @@ impl Feature {
         use Feature::*;
         matches!(
             self,
-            WorldX
-                | WorldY
-                | WorldZ
-                | NormalX
-                | NormalY
-                | NormalZ
-                | TextureColorR
-                | TextureColorG
-                | TextureColorB
+            WorldX | WorldY | WorldZ | NormalX | NormalY | NormalZ | TextureColorR | TextureColorG | TextureColorB
         )
     }
 }
@@ -221,10 +213,7 @@ pub struct SampleLayout {
 
 impl Default for SampleLayout {
     fn default() -> Self {
-        SampleLayout {
-            entries: Vec::new(),
-            roughness_threshold: DEFAULT_ROUGHNESS_THRESHOLD,
-        }
+        SampleLayout { entries: Vec::new(), roughness_threshold: DEFAULT_ROUGHNESS_THRESHOLD }
     }
 }
 
@@ -241,21 +230,13 @@ impl SampleLayout {
 
     /// Appends an element with the given direction.
     pub fn with_io(mut self, name: &str, io: ElementIo) -> Self {
-        self.entries.push(LayoutEntry {
-            name: name.to_string(),
-            number: 0,
-            io,
-        });
+        self.entries.push(LayoutEntry { name: name.to_string(), number: 0, io });
         self
     }
 
     /// Appends a numbered OUTPUT feature (e.g. `("NORMAL_X", 1)`).
     pub fn with_number(mut self, name: &str, number: u32) -> Self {
-        self.entries.push(LayoutEntry {
-            name: name.to_string(),
-            number,
-            io: ElementIo::Output,
-        });
+        self.entries.push(LayoutEntry { name: name.to_string(), number, io: ElementIo::Output });
         self
     }
 
@@ -294,22 +275,14 @@ impl SampleLayout {
             *slot = position as u16;
             elements.push((element, entry.io));
         }
-        Ok(CompiledLayout {
-            elements,
-            table,
-            roughness_threshold: self.roughness_threshold,
-            source: self.clone(),
-        })
+        Ok(CompiledLayout { elements, table, roughness_threshold: self.roughness_threshold, source: self.clone() })
     }
 }
 
 fn parse_entry(entry: &LayoutEntry) -> Result<Element, String> {
     if let Some(p) = RandomParameter::from_name(&entry.name) {
         if entry.number != 0 {
-            return Err(format!(
-                "random parameters are not numbered (got number {})",
-                entry.number
-            ));
+            return Err(format!("random parameters are not numbered (got number {})", entry.number));
         }
         return Ok(Element::Parameter(p));
     }
@@ -324,19 +297,12 @@ fn parse_entry(entry: &LayoutEntry) -> Result<Element, String> {
             ));
         }
         if entry.number > MAX_FEATURE_NUMBER {
-            return Err(format!(
-                "number {} out of range 0..={MAX_FEATURE_NUMBER}",
-                entry.number
-            ));
+            return Err(format!("number {} out of range 0..={MAX_FEATURE_NUMBER}", entry.number));
         }
         return Ok(Element::Feature(f, entry.number as u8));
     }
     // Help with the one misspelling the original accepted silently.
-    if let Some(base) = entry
-        .name
-        .strip_suffix("_1")
-        .or_else(|| entry.name.strip_suffix("_0"))
-    {
+    if let Some(base) = entry.name.strip_suffix("_1").or_else(|| entry.name.strip_suffix("_0")) {
         if Feature::from_name(base).is_some_and(Feature::is_numbered) {
             return Err(format!(
                 "unknown name; write ({base:?}, {}) for a numbered feature",
@@ -410,8 +376,7 @@ impl CompiledLayout {
     }
     /// Whether a random parameter is present and INPUT.
     pub fn is_input(&self, p: RandomParameter) -> bool {
-        self.parameter_offset(p)
-            .is_some_and(|i| self.elements[i].1 == ElementIo::Input)
+        self.parameter_offset(p).is_some_and(|i| self.elements[i].1 == ElementIo::Input)
     }
     /// Whether any element is INPUT.
     pub fn has_input(&self) -> bool {
@@ -419,10 +384,7 @@ impl CompiledLayout {
     }
     /// Number of INPUT elements.
     pub fn input_size(&self) -> usize {
-        self.elements
-            .iter()
-            .filter(|(_, io)| *io == ElementIo::Input)
-            .count()
+        self.elements.iter().filter(|(_, io)| *io == ElementIo::Input).count()
     }
     /// Whether a feature (any number) is requested: lets renderers skip work.
     pub fn wants(&self, f: Feature) -> bool {
@@ -490,10 +452,7 @@ mod tests {
     #[test]
     fn unknown_name_is_named() {
         let e = err(SampleLayout::new().with("COLOR_R").with("COLOUR_G"));
-        assert!(
-            e.contains("element 1") && e.contains("COLOUR_G") && e.contains("unknown"),
-            "{e}"
-        );
+        assert!(e.contains("element 1") && e.contains("COLOUR_G") && e.contains("unknown"), "{e}");
     }
 
     #[test]
@@ -504,14 +463,8 @@ mod tests {
 
     #[test]
     fn duplicates_are_rejected() {
-        let e = err(SampleLayout::new()
-            .with("COLOR_R")
-            .with("COLOR_G")
-            .with("COLOR_R"));
-        assert!(
-            e.contains("element 2") && e.contains("duplicate") && e.contains("position 0"),
-            "{e}"
-        );
+        let e = err(SampleLayout::new().with("COLOR_R").with("COLOR_G").with("COLOR_R"));
+        assert!(e.contains("element 2") && e.contains("duplicate") && e.contains("position 0"), "{e}");
     }
 
     #[test]
@@ -524,24 +477,13 @@ mod tests {
 
     #[test]
     fn features_cannot_be_input() {
-        assert!(
-            err(SampleLayout::new().with_io("COLOR_R", ElementIo::Input)).contains("always OUTPUT")
-        );
+        assert!(err(SampleLayout::new().with_io("COLOR_R", ElementIo::Input)).contains("always OUTPUT"));
     }
 
     #[test]
     fn empty_and_bad_roughness() {
-        assert_eq!(
-            SampleLayout::new().compile().unwrap_err(),
-            LayoutError::Empty
-        );
-        assert!(err(SampleLayout::new()
-            .with("COLOR_R")
-            .with_roughness_threshold(-1.0))
-        .contains("roughness"));
-        assert!(err(SampleLayout::new()
-            .with("COLOR_R")
-            .with_roughness_threshold(f32::NAN))
-        .contains("roughness"));
+        assert_eq!(SampleLayout::new().compile().unwrap_err(), LayoutError::Empty);
+        assert!(err(SampleLayout::new().with("COLOR_R").with_roughness_threshold(-1.0)).contains("roughness"));
+        assert!(err(SampleLayout::new().with("COLOR_R").with_roughness_threshold(f32::NAN)).contains("roughness"));
     }
 }

@@ -53,16 +53,22 @@ pub struct Hello {
     pub role: Role,
     /// The sender's process id (for logs; never trusted).
     pub pid: u32,
+    /// The session token the manager gave the technique in
+    /// `FBKSD_SESSION`, proving it is the process started for this run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub session: Option<String>,
 }
 
 impl Hello {
-    /// This process's hello for `role`.
+    /// This process's hello for `role`, with the session token of the
+    /// environment (`FBKSD_SESSION`) if there is one.
     pub fn new(role: Role) -> Self {
         Hello {
             protocol: PROTOCOL_NAME.into(),
             version: PROTOCOL_VERSION,
             role,
             pid: std::process::id(),
+            session: std::env::var(crate::rendezvous::SESSION_ENV_VAR).ok(),
         }
     }
 }
@@ -349,10 +355,7 @@ mod tests {
         write_frame(&mut buf, &FromTechnique::Consumed { slot: 3 }).unwrap();
         write_frame(&mut buf, &Hello::new(Role::Renderer)).unwrap();
         let mut r = &buf[..];
-        assert_eq!(
-            read_frame::<_, FromTechnique>(&mut r).unwrap(),
-            Some(FromTechnique::Consumed { slot: 3 })
-        );
+        assert_eq!(read_frame::<_, FromTechnique>(&mut r).unwrap(), Some(FromTechnique::Consumed { slot: 3 }));
         let hello: Hello = read_frame(&mut r).unwrap().unwrap();
         assert_eq!(hello.role, Role::Renderer);
         assert!(read_frame::<_, Hello>(&mut r).unwrap().is_none());
@@ -363,24 +366,16 @@ mod tests {
         let mut buf = Vec::new();
         write_frame(&mut buf, &FromTechnique::Consumed { slot: 3 }).unwrap();
         let cut = &buf[..buf.len() - 1];
-        assert!(matches!(
-            read_frame::<_, FromTechnique>(&mut &cut[..]),
-            Err(FrameError::Truncated)
-        ));
+        assert!(matches!(read_frame::<_, FromTechnique>(&mut &cut[..]), Err(FrameError::Truncated)));
         let huge = (MAX_FRAME + 1).to_le_bytes();
-        assert!(matches!(
-            read_frame::<_, FromTechnique>(&mut &huge[..]),
-            Err(FrameError::BadLength(_))
-        ));
+        assert!(matches!(read_frame::<_, FromTechnique>(&mut &huge[..]), Err(FrameError::BadLength(_))));
     }
 
     #[test]
     fn unknown_message_is_a_decode_error_with_text() {
         let mut buf = Vec::new();
         write_frame(&mut buf, &serde_json::json!({"type": "launch_missiles"})).unwrap();
-        let e = read_frame::<_, FromTechnique>(&mut &buf[..])
-            .unwrap_err()
-            .to_string();
+        let e = read_frame::<_, FromTechnique>(&mut &buf[..]).unwrap_err().to_string();
         assert!(e.contains("launch_missiles"), "{e}");
     }
 }

@@ -11,11 +11,12 @@ use std::path::{Path, PathBuf};
 /// Environment variable holding the rendezvous directory's path.
 pub const ENV_VAR: &str = "FBKSD_RENDEZVOUS";
 
+/// Environment variable holding the session token of a technique the
+/// manager started; its hello must carry it back.
+pub const SESSION_ENV_VAR: &str = "FBKSD_SESSION";
+
 /// The control socket's file name inside the rendezvous directory.
 pub const CONTROL_SOCKET: &str = "control.sock";
-
-/// The result image's shared-memory file name.
-pub const RESULT_FILE: &str = "result.f32";
 
 /// Path of the control socket of a rendezvous directory.
 pub fn control_socket(dir: &Path) -> PathBuf {
@@ -46,4 +47,12 @@ fn tempfile_probe(dir: &Path) -> bool {
     let ok = std::fs::write(&probe, b"").is_ok();
     let _ = std::fs::remove_file(&probe);
     ok
+}
+
+/// A fresh, unguessable session token (128 bits from the OS, in hex).
+pub fn new_session_token() -> std::io::Result<String> {
+    use std::io::Read;
+    let mut bytes = [0u8; 16];
+    std::fs::File::open("/dev/urandom")?.read_exact(&mut bytes)?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }

@@ -178,13 +178,10 @@ impl SceneInfo {
 
     /// Reads a key as `T`.
     pub fn get<T: FromSceneValue>(&self, key: &str) -> Result<T, SceneInfoError> {
-        let value = self
-            .values
-            .get(key)
-            .ok_or_else(|| SceneInfoError::Missing {
-                key: key.to_string(),
-                available: self.values.keys().cloned().collect::<Vec<_>>().join(", "),
-            })?;
+        let value = self.values.get(key).ok_or_else(|| SceneInfoError::Missing {
+            key: key.to_string(),
+            available: self.values.keys().cloned().collect::<Vec<_>>().join(", "),
+        })?;
         T::from_scene_value(value).ok_or_else(|| SceneInfoError::WrongType {
             key: key.to_string(),
             expected: T::TYPE_NAME,
@@ -205,15 +202,12 @@ impl SceneInfo {
 
     fn positive_dimension(&self, key: &str) -> Result<u32, SceneInfoError> {
         let v = self.get::<i64>(key)?;
-        u32::try_from(v)
-            .ok()
-            .filter(|v| *v > 0)
-            .ok_or_else(|| SceneInfoError::WrongType {
-                key: key.to_string(),
-                expected: "positive int below 2^32",
-                found: "int",
-                value: v.to_string(),
-            })
+        u32::try_from(v).ok().filter(|v| *v > 0).ok_or_else(|| SceneInfoError::WrongType {
+            key: key.to_string(),
+            expected: "positive int below 2^32",
+            found: "int",
+            value: v.to_string(),
+        })
     }
 
     /// All keys and values, sorted by key.
@@ -224,8 +218,7 @@ impl SceneInfo {
     /// This info with every item of `other` added (other wins on conflicts).
     pub fn merged(&self, other: &SceneInfo) -> SceneInfo {
         let mut out = self.clone();
-        out.values
-            .extend(other.values.iter().map(|(k, v)| (k.clone(), v.clone())));
+        out.values.extend(other.values.iter().map(|(k, v)| (k.clone(), v.clone())));
         out
     }
 }
@@ -277,10 +270,7 @@ mod tests {
 
     fn info() -> SceneInfo {
         let mut i = SceneInfo::new();
-        i.set("width", 640)
-            .set("has_dof", true)
-            .set("shutter_open", 0.25)
-            .set("name", "box");
+        i.set("width", 640).set("has_dof", true).set("shutter_open", 0.25).set("name", "box");
         i
     }
 
@@ -304,10 +294,7 @@ mod tests {
     #[test]
     fn wrong_type_says_both_types() {
         let e = info().get::<i64>("shutter_open").unwrap_err().to_string();
-        assert!(
-            e.contains("float") && e.contains("not a int") && e.contains("0.25"),
-            "{e}"
-        );
+        assert!(e.contains("float") && e.contains("not a int") && e.contains("0.25"), "{e}");
     }
 
     #[test]

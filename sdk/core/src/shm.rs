@@ -53,63 +53,34 @@ pub enum ShmError {
 impl SharedRegion {
     /// Creates a zero-filled file of `len` bytes (it must not exist) and maps it.
     pub fn create(path: &Path, len: u64) -> Result<Self, ShmError> {
-        let io = |source| ShmError::Io {
-            path: path.to_path_buf(),
-            source,
-        };
-        let file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create_new(true)
-            .open(path)
-            .map_err(io)?;
+        let io = |source| ShmError::Io { path: path.to_path_buf(), source };
+        let file = OpenOptions::new().read(true).write(true).create_new(true).open(path).map_err(io)?;
         file.set_len(len).map_err(io)?;
         Self::map(file, path, len)
     }
 
     /// Opens and maps an existing file, checking its size.
     pub fn open(path: &Path, expected_len: u64) -> Result<Self, ShmError> {
-        let io = |source| ShmError::Io {
-            path: path.to_path_buf(),
-            source,
-        };
-        let file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(path)
-            .map_err(io)?;
+        let io = |source| ShmError::Io { path: path.to_path_buf(), source };
+        let file = OpenOptions::new().read(true).write(true).open(path).map_err(io)?;
         let actual = file.metadata().map_err(io)?.len();
         if actual != expected_len {
-            return Err(ShmError::Size {
-                path: path.to_path_buf(),
-                expected: expected_len,
-                actual,
-            });
+            return Err(ShmError::Size { path: path.to_path_buf(), expected: expected_len, actual });
         }
         Self::map(file, path, expected_len)
     }
 
     fn map(file: File, path: &Path, len: u64) -> Result<Self, ShmError> {
         if len == 0 {
-            return Err(ShmError::Size {
-                path: path.to_path_buf(),
-                expected: 1,
-                actual: 0,
-            });
+            return Err(ShmError::Size { path: path.to_path_buf(), expected: 1, actual: 0 });
         }
         // Not populated: a process's peak RSS then counts only the pages it
         // really touched (peak memory is one of the benchmark's measures).
         let map = MmapOptions::new()
             .len(len as usize)
             .map_raw(&file)
-            .map_err(|source| ShmError::Io {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        Ok(SharedRegion {
-            map,
-            path: path.to_path_buf(),
-        })
+            .map_err(|source| ShmError::Io { path: path.to_path_buf(), source })?;
+        Ok(SharedRegion { map, path: path.to_path_buf() })
     }
 
     /// Size in bytes.
@@ -133,10 +104,7 @@ impl SharedRegion {
     /// The caller must own these bytes under the protocol: no other process
     /// writes them while the slice lives.
     pub unsafe fn floats(&self, offset: usize, count: usize) -> &[f32] {
-        assert!(
-            offset % 4 == 0 && offset + count * 4 <= self.len(),
-            "range outside shared region"
-        );
+        assert!(offset % 4 == 0 && offset + count * 4 <= self.len(), "range outside shared region");
         // SAFETY: in bounds and aligned (mappings are page-aligned); exclusivity by the caller.
         unsafe { std::slice::from_raw_parts(self.map.as_ptr().add(offset) as *const f32, count) }
     }
@@ -147,14 +115,9 @@ impl SharedRegion {
     /// As [`Self::floats`], and no other slice of these bytes may be alive.
     #[allow(clippy::mut_from_ref)]
     pub unsafe fn floats_mut(&self, offset: usize, count: usize) -> &mut [f32] {
-        assert!(
-            offset % 4 == 0 && offset + count * 4 <= self.len(),
-            "range outside shared region"
-        );
+        assert!(offset % 4 == 0 && offset + count * 4 <= self.len(), "range outside shared region");
         // SAFETY: in bounds and aligned; exclusivity by the caller.
-        unsafe {
-            std::slice::from_raw_parts_mut(self.map.as_mut_ptr().add(offset) as *mut f32, count)
-        }
+        unsafe { std::slice::from_raw_parts_mut(self.map.as_mut_ptr().add(offset) as *mut f32, count) }
     }
 }
 
@@ -198,25 +161,15 @@ impl Ring {
     /// the manager never touches sample data, so it never maps the ring).
     pub fn create_file(dir: &Path, spec: RingSpec) -> Result<PathBuf, ShmError> {
         let path = dir.join(spec.file_name());
-        let io = |source| ShmError::Io {
-            path: path.clone(),
-            source,
-        };
-        let file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&path)
-            .map_err(io)?;
+        let io = |source| ShmError::Io { path: path.clone(), source };
+        let file = OpenOptions::new().write(true).create_new(true).open(&path).map_err(io)?;
         file.set_len(spec.total_bytes()).map_err(io)?;
         Ok(path)
     }
 
     /// Maps an existing ring (renderer and technique side).
     pub fn open(dir: &Path, spec: RingSpec) -> Result<Self, ShmError> {
-        Ok(Ring {
-            region: SharedRegion::open(&dir.join(spec.file_name()), spec.total_bytes())?,
-            spec,
-        })
+        Ok(Ring { region: SharedRegion::open(&dir.join(spec.file_name()), spec.total_bytes())?, spec })
     }
 
     /// The ring's geometry.
@@ -229,15 +182,9 @@ impl Ring {
     /// # Safety
     /// The caller must own the slot under the protocol.
     pub unsafe fn slot(&self, slot: u32, floats: usize) -> &[f32] {
-        assert!(
-            slot < self.spec.slot_count && floats as u64 * 4 <= self.spec.slot_bytes,
-            "slot out of range"
-        );
+        assert!(slot < self.spec.slot_count && floats as u64 * 4 <= self.spec.slot_bytes, "slot out of range");
         // SAFETY: forwarded to the caller.
-        unsafe {
-            self.region
-                .floats(slot as usize * self.spec.slot_bytes as usize, floats)
-        }
+        unsafe { self.region.floats(slot as usize * self.spec.slot_bytes as usize, floats) }
     }
 
     /// The first `floats` floats of slot `slot`, writable.
@@ -246,15 +193,9 @@ impl Ring {
     /// The caller must own the slot under the protocol and hold no other slice of it.
     #[allow(clippy::mut_from_ref)]
     pub unsafe fn slot_mut(&self, slot: u32, floats: usize) -> &mut [f32] {
-        assert!(
-            slot < self.spec.slot_count && floats as u64 * 4 <= self.spec.slot_bytes,
-            "slot out of range"
-        );
+        assert!(slot < self.spec.slot_count && floats as u64 * 4 <= self.spec.slot_bytes, "slot out of range");
         // SAFETY: forwarded to the caller.
-        unsafe {
-            self.region
-                .floats_mut(slot as usize * self.spec.slot_bytes as usize, floats)
-        }
+        unsafe { self.region.floats_mut(slot as usize * self.spec.slot_bytes as usize, floats) }
     }
 }
 
@@ -273,11 +214,7 @@ mod tests {
     #[test]
     fn two_mappings_see_the_same_bytes() {
         let dir = tempfile::tempdir().unwrap();
-        let spec = RingSpec {
-            session: 7,
-            slot_count: 2,
-            slot_bytes: 4096,
-        };
+        let spec = RingSpec { session: 7, slot_count: 2, slot_bytes: 4096 };
         Ring::create_file(dir.path(), spec).unwrap();
         let a = Ring::open(dir.path(), spec).unwrap();
         let b = Ring::open(dir.path(), spec).unwrap();

@@ -73,8 +73,7 @@ impl Tile {
     /// Index (in samples) of sample `s` of pixel `(x, y)` in a pixel tile.
     #[inline]
     pub fn sample_index(rect: &TileRect, spp: u32, x: u32, y: u32, s: u32) -> usize {
-        (((y - rect.y0) as usize * rect.width() as usize + (x - rect.x0) as usize) * spp as usize)
-            + s as usize
+        (((y - rect.y0) as usize * rect.width() as usize + (x - rect.x0) as usize) * spp as usize) + s as usize
     }
 }
 
@@ -84,12 +83,7 @@ mod tests {
 
     #[test]
     fn sample_index_matches_the_original_order() {
-        let rect = TileRect {
-            x0: 16,
-            y0: 32,
-            x1: 32,
-            y1: 48,
-        };
+        let rect = TileRect { x0: 16, y0: 32, x1: 32, y1: 48 };
         // ((y−by)·tileW + (x−bx))·spp + s
         assert_eq!(Tile::sample_index(&rect, 4, 16, 32, 0), 0);
         assert_eq!(Tile::sample_index(&rect, 4, 16, 32, 3), 3);
@@ -100,19 +94,8 @@ mod tests {
 
     #[test]
     fn rect_bounds() {
-        let r = TileRect {
-            x0: 0,
-            y0: 0,
-            x1: 4,
-            y1: 4,
-        };
+        let r = TileRect { x0: 0, y0: 0, x1: 4, y1: 4 };
         assert!(r.is_inside(4, 4) && !r.is_inside(3, 4));
-        assert!(!TileRect {
-            x0: 2,
-            y0: 0,
-            x1: 2,
-            y1: 1
-        }
-        .is_inside(4, 4));
+        assert!(!TileRect { x0: 2, y0: 0, x1: 2, y1: 1 }.is_inside(4, 4));
     }
 }

@@ -74,25 +74,16 @@ impl Benchmark {
         for scene in &self.scenes {
             let scene_name = path_safe_name(&scene.name);
             let renderer_log = results.renderer_log(&scene_name)?;
-            let mut runner = SceneRunner::new(
-                scene.renderer_argv.clone(),
-                Some(renderer_log),
-                self.limits.clone(),
-            )?;
+            let mut runner = SceneRunner::new(scene.renderer_argv.clone(), Some(renderer_log), self.limits.clone())?;
             for technique in &self.techniques {
                 let technique_name = path_safe_name(&technique.name);
                 let dir = results.run_dir(&technique_name, &scene_name)?;
                 for &spp in &scene.spps {
-                    progress(Progress::RunStarted {
-                        scene: &scene_name,
-                        technique: &technique_name,
-                        spp,
-                    });
+                    progress(Progress::RunStarted { scene: &scene_name, technique: &technique_name, spp });
                     let stem = format!("{spp}_0");
                     let technique_log = dir.join(format!("{stem}_technique.log"));
                     let _ = std::fs::remove_file(&technique_log);
-                    let date =
-                        humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+                    let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
                     let outcome = runner.run_with_progress(
                         spp,
                         &TechniqueLaunch::Command(technique.argv.clone()),
@@ -104,16 +95,14 @@ impl Benchmark {
                     let mut status = outcome.status;
                     let mut message = outcome.message;
                     let image = match &outcome.image {
-                        Some(rgb) => {
-                            match write_exr(&image_path, outcome.width, outcome.height, rgb) {
-                                Ok(()) => Some(image_path),
-                                Err(e) => {
-                                    status = RunStatus::InvalidOutput;
-                                    message = format!("cannot write the result image: {e}");
-                                    None
-                                }
+                        Some(rgb) => match write_exr(&image_path, outcome.width, outcome.height, rgb) {
+                            Ok(()) => Some(image_path),
+                            Err(e) => {
+                                status = RunStatus::InvalidOutput;
+                                message = format!("cannot write the result image: {e}");
+                                None
                             }
-                        }
+                        },
                         None => None,
                     };
                     let record = RunRecord {

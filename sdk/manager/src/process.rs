@@ -74,13 +74,12 @@ impl Supervised {
     /// waiter thread).
     pub fn spawn(
         argv: &[String],
-        env: &[(&str, &Path)],
+        env: &[(&str, &std::ffi::OsStr)],
         log: Option<&Path>,
         on_exit: impl FnOnce(ExitInfo) + Send + 'static,
     ) -> io::Result<Self> {
-        let (program, args) = argv
-            .split_first()
-            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "empty command"))?;
+        let (program, args) =
+            argv.split_first().ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "empty command"))?;
         let mut command = Command::new(program);
         command.args(args).stdin(Stdio::null()).process_group(0);
         // Its own process group keeps a terminal's Ctrl-C from reaching it, so
@@ -102,15 +101,11 @@ impl Supervised {
             command.env(k, v);
         }
         let started = Instant::now();
-        let child = command
-            .spawn()
-            .map_err(|e| io::Error::new(e.kind(), format!("cannot start {program:?}: {e}")))?;
+        let child = command.spawn().map_err(|e| io::Error::new(e.kind(), format!("cannot start {program:?}: {e}")))?;
         let pid = child.id() as i32;
         // The waiter reaps with wait4; std's Child is dropped unreaped on purpose.
         drop(child);
-        std::thread::Builder::new()
-            .name(format!("wait-{pid}"))
-            .spawn(move || on_exit(wait4(pid)))?;
+        std::thread::Builder::new().name(format!("wait-{pid}")).spawn(move || on_exit(wait4(pid)))?;
         Ok(Supervised { pid, started })
     }
 

@@ -10,18 +10,18 @@ use crate::process::{log_tail, report_to, ExitInfo, Supervised};
 use crate::record::{RunStatus, Times};
 use fbksd_core::layout::CompiledLayout;
 use fbksd_core::protocol::{
-    read_frame, write_frame, Amount, ErrorKind, FromRenderer, FromTechnique, Hello, Role,
-    ToRenderer, ToTechnique, PROTOCOL_NAME, PROTOCOL_VERSION,
+    read_frame, write_frame, Amount, ErrorKind, FromRenderer, FromTechnique, Hello, Role, ToRenderer, ToTechnique,
+    PROTOCOL_NAME, PROTOCOL_VERSION,
 };
 use fbksd_core::scene_info::keys;
-use fbksd_core::shm::{Ring, RingSpec, SharedRegion};
+use fbksd_core::shm::{Ring, RingSpec};
 use fbksd_core::{rendezvous, SceneInfo, Tile};
 use std::collections::VecDeque;
 use std::io::BufReader;
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
+use std::sync::mpsc::{channel, Receiver, Sender};
 use std::time::{Duration, Instant};
 
 /// Default size of one ring slot. Large enough that a hand-off costs far
@@ -88,6 +88,41 @@ pub struct RunOutcome {
     pub peak_memory_bytes: u64,
 }
 
+/// The runner's event channel, with events set aside while waiting for a
+/// particular one (so none is ever dropped).
+struct Inbox {
+    rx: Receiver<Event>,
+    deferred: VecDeque<Event>,
+}
+
+impl Inbox {
+    /// The next event, or `None` when `deadline` passes first.
+    fn next(&mut self, deadline: Option<Instant>) -> Option<Event> {
+        if let Some(e) = self.deferred.pop_front() {
+            return Some(e);
+        }
+        match deadline {
+            Some(d) => self.rx.recv_timeout(d.saturating_duration_since(Instant::now())).ok(),
+            None => self.rx.recv().ok(),
+        }
+    }
+
+    /// The first event `pick` accepts within `within`; others are kept for later.
+    fn wait_for(&mut self, within: Duration, pick: impl Fn(&Event) -> bool) -> Option<Event> {
+        if let Some(i) = self.deferred.iter().position(&pick) {
+            return self.deferred.remove(i);
+        }
+        let deadline = Instant::now() + within;
+        loop {
+            match self.rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                Ok(e) if pick(&e) => return Some(e),
+                Ok(e) => self.deferred.push_back(e),
+                Err(_) => return None,
+            }
+        }
+    }
+}
+
 enum Event {
     Connected(UnixStream, Hello),
     Technique(u64, Result<Option<FromTechnique>, String>),
@@ -118,7 +153,7 @@ pub struct SceneRunner {
     renderer_log: Option<PathBuf>,
     limits: Limits,
     tx: Sender<Event>,
-    rx: Receiver<Event>,
+    inbox: Inbox,
     renderer: Option<RendererConn>,
     renderer_error: Option<String>,
     generation: u64,
@@ -130,30 +165,22 @@ impl SceneRunner {
     /// Creates the rendezvous directory for a renderer command (whose last
     /// argument is normally the scene file); the renderer starts on the
     /// first run. Its output goes to `renderer_log`, or is inherited when `None`.
-    pub fn new(
-        renderer_argv: Vec<String>,
-        renderer_log: Option<PathBuf>,
-        limits: Limits,
-    ) -> std::io::Result<Self> {
-        let dir = tempfile::Builder::new()
-            .prefix("fbksd-run-")
-            .tempdir_in(rendezvous::default_parent())?;
+    pub fn new(renderer_argv: Vec<String>, renderer_log: Option<PathBuf>, limits: Limits) -> std::io::Result<Self> {
+        let dir = tempfile::Builder::new().prefix("fbksd-run-").tempdir_in(rendezvous::default_parent())?;
         // Containers running as another user share this directory; the
         // directory's own name is unguessable and its parent is not listed to them.
         std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o700))?;
         let listener = UnixListener::bind(rendezvous::control_socket(dir.path()))?;
         let (tx, rx) = channel();
         let accept_tx = tx.clone();
-        std::thread::Builder::new()
-            .name("fbksd-accept".into())
-            .spawn(move || accept_loop(listener, accept_tx))?;
+        std::thread::Builder::new().name("fbksd-accept".into()).spawn(move || accept_loop(listener, accept_tx))?;
         Ok(SceneRunner {
             dir,
             renderer_argv,
             renderer_log,
             limits,
             tx,
-            rx,
+            inbox: Inbox { rx, deferred: VecDeque::new() },
             renderer: None,
             renderer_error: None,
             generation: 0,
@@ -192,17 +219,10 @@ impl SceneRunner {
 
     fn start_renderer(&mut self) -> Result<(), String> {
         let generation = self.next_generation();
-        let on_exit = report_to(self.tx.clone(), move |info| {
-            Event::RendererExited(generation, info)
-        });
-        let env = [(rendezvous::ENV_VAR, self.dir.path())];
-        let process = Supervised::spawn(
-            &self.renderer_argv,
-            &env,
-            self.renderer_log.as_deref(),
-            on_exit,
-        )
-        .map_err(|e| format!("renderer {}: {e}", shell_words::join(&self.renderer_argv)))?;
+        let on_exit = report_to(self.tx.clone(), move |info| Event::RendererExited(generation, info));
+        let env = [(rendezvous::ENV_VAR, self.dir.path().as_os_str())];
+        let process = Supervised::spawn(&self.renderer_argv, &env, self.renderer_log.as_deref(), on_exit)
+            .map_err(|e| format!("renderer {}: {e}", shell_words::join(&self.renderer_argv)))?;
         let deadline = Instant::now() + self.limits.renderer_start;
         let mut writer: Option<UnixStream> = None;
         let fail = |process: &Supervised, why: String| {
@@ -210,38 +230,25 @@ impl SceneRunner {
             Err(format!("{why}{}", log_note(self.renderer_log.as_deref())))
         };
         loop {
-            let event = match self
-                .rx
-                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            {
-                Ok(e) => e,
-                Err(_) => {
+            let event = match self.inbox.next(Some(deadline)) {
+                Some(e) => e,
+                None => {
                     return fail(
                         &process,
-                        format!(
-                            "the renderer did not become ready within {:?}",
-                            self.limits.renderer_start
-                        ),
+                        format!("the renderer did not become ready within {:?}", self.limits.renderer_start),
                     )
                 }
             };
             match event {
-                Event::Connected(stream, hello)
-                    if hello.role == Role::Renderer && writer.is_none() =>
-                {
+                Event::Connected(stream, hello) if hello.role == Role::Renderer && writer.is_none() => {
                     let mut w = match stream.try_clone() {
                         Ok(w) => w,
                         Err(e) => return fail(&process, format!("renderer connection: {e}")),
                     };
-                    let _ = write_frame(
-                        &mut w,
-                        &ToRenderer::Welcome {
-                            version: PROTOCOL_VERSION,
-                        },
-                    );
-                    spawn_reader(stream, self.tx.clone(), move |m| {
-                        Event::Renderer(generation, m)
-                    });
+                    // A renderer that stops reading must not block the manager.
+                    let _ = w.set_write_timeout(Some(Duration::from_secs(30)));
+                    let _ = write_frame(&mut w, &ToRenderer::Welcome { version: PROTOCOL_VERSION });
+                    spawn_reader(stream, self.tx.clone(), move |m| Event::Renderer(generation, m));
                     writer = Some(w);
                 }
                 Event::Connected(stream, hello) if hello.role == Role::Technique => {
@@ -250,48 +257,23 @@ impl SceneRunner {
                 Event::Connected(mut stream, _) => {
                     refuse(&mut stream, "a renderer is already connected to this run");
                 }
-                Event::Renderer(
-                    g,
-                    Ok(Some(FromRenderer::Ready {
-                        tile_size,
-                        scene_info,
-                    })),
-                ) if g == generation => {
+                Event::Renderer(g, Ok(Some(FromRenderer::Ready { tile_size, scene_info }))) if g == generation => {
                     if let Err(e) = scene_info.width().and(scene_info.height()) {
-                        return fail(
-                            &process,
-                            format!("the renderer's scene info is unusable: {e}"),
-                        );
+                        return fail(&process, format!("the renderer's scene info is unusable: {e}"));
                     }
                     let writer = writer.take().expect("ready comes after connect");
-                    self.renderer = Some(RendererConn {
-                        process,
-                        writer,
-                        generation,
-                        tile_size: tile_size.max(1),
-                        scene_info,
-                    });
+                    self.renderer =
+                        Some(RendererConn { process, writer, generation, tile_size: tile_size.max(1), scene_info });
                     return Ok(());
                 }
-                Event::Renderer(g, Ok(Some(FromRenderer::Failed { message })))
-                    if g == generation =>
-                {
+                Event::Renderer(g, Ok(Some(FromRenderer::Failed { message }))) if g == generation => {
                     return fail(&process, format!("the renderer failed to start: {message}"));
                 }
                 Event::Renderer(g, other) if g == generation => {
-                    return fail(
-                        &process,
-                        format!("the renderer sent {other:?} instead of ready"),
-                    );
+                    return fail(&process, format!("the renderer sent {other:?} instead of ready"));
                 }
                 Event::RendererExited(g, info) if g == generation => {
-                    return fail(
-                        &process,
-                        format!(
-                            "the renderer exited ({}) before it was ready",
-                            info.describe()
-                        ),
-                    );
+                    return fail(&process, format!("the renderer exited ({}) before it was ready", info.describe()));
                 }
                 _ => {} // stale events of earlier processes
             }
@@ -339,54 +321,57 @@ impl SceneRunner {
         let session_id = self.sessions;
         let technique_generation = self.next_generation();
         let renderer = self.renderer.as_mut().expect("ensured");
-        let (width, height) = (
-            renderer.scene_info.width().unwrap(),
-            renderer.scene_info.height().unwrap(),
-        );
+        let (width, height) = (renderer.scene_info.width().unwrap(), renderer.scene_info.height().unwrap());
         let pixels = width as u64 * height as u64;
         outcome.width = width;
         outcome.height = height;
         outcome.samples_budget = spp.saturating_mul(pixels);
 
         let mut info = renderer.scene_info.clone();
-        info.set(keys::MAX_SPP, spp as i64)
-            .set(keys::MAX_SAMPLES, outcome.samples_budget as i64);
+        info.set(keys::MAX_SPP, spp as i64).set(keys::MAX_SAMPLES, outcome.samples_budget as i64);
         let result_file = format!("result-{session_id}.f32");
         let result_path = self.dir.path().join(&result_file);
-        let result_region = match SharedRegion::create(&result_path, pixels * 12) {
-            Ok(r) => r,
+        // The manager never maps the result: it reads it once, with pread,
+        // so a technique that truncates the file cannot crash it.
+        let result_buffer = match std::fs::File::options()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&result_path)
+            .and_then(|f| f.set_len(pixels * 12).map(|_| f))
+        {
+            Ok(f) => f,
             Err(e) => {
                 outcome.status = RunStatus::LaunchFailed;
                 outcome.message = format!("cannot create the result buffer: {e}");
                 return outcome;
             }
         };
-
         let started = Instant::now();
+        let token = match launch {
+            TechniqueLaunch::Command(_) => match rendezvous::new_session_token() {
+                Ok(t) => Some(t),
+                Err(e) => return launch_failed(outcome, format!("cannot make a session token: {e}"), &result_path),
+            },
+            TechniqueLaunch::External => None,
+        };
         let technique = match launch {
             TechniqueLaunch::Command(argv) => {
-                let on_exit = report_to(self.tx.clone(), move |i| {
-                    Event::TechniqueExited(technique_generation, i)
-                });
-                match Supervised::spawn(
-                    argv,
-                    &[(rendezvous::ENV_VAR, self.dir.path())],
-                    Some(technique_log),
-                    on_exit,
-                ) {
+                let on_exit = report_to(self.tx.clone(), move |i| Event::TechniqueExited(technique_generation, i));
+                let env = [
+                    (rendezvous::ENV_VAR, self.dir.path().as_os_str()),
+                    (rendezvous::SESSION_ENV_VAR, std::ffi::OsStr::new(token.as_deref().unwrap_or(""))),
+                ];
+                match Supervised::spawn(argv, &env, Some(technique_log), on_exit) {
                     Ok(p) => Some(p),
-                    Err(e) => {
-                        let _ = std::fs::remove_file(&result_path);
-                        outcome.status = RunStatus::LaunchFailed;
-                        outcome.message = e.to_string();
-                        return outcome;
-                    }
+                    Err(e) => return launch_failed(outcome, e.to_string(), &result_path),
                 }
             }
             TechniqueLaunch::External => None,
         };
 
         let mut s = Session {
+            token,
             dir: self.dir.path().to_path_buf(),
             id: session_id,
             generation: technique_generation,
@@ -425,7 +410,7 @@ impl SceneRunner {
         }
 
         let deadline = self.limits.time_limit.map(|l| started + l);
-        let (status, message) = self.event_loop(&mut s, &result_region, deadline, progress);
+        let (status, message) = self.event_loop(&mut s, &result_buffer, deadline, progress);
 
         // Clean up: the technique, then the renderer (restarted next time if
         // the session left it mid-request), then the shared files.
@@ -435,7 +420,9 @@ impl SceneRunner {
                 s.exit = self.wait_technique_exit(technique_generation, Duration::from_secs(2));
             }
         }
-        if s.renderer_broken || s.active.is_some() {
+        // A renderer left inside a request or a layout change is restarted:
+        // its late replies must not reach the next session.
+        if s.renderer_broken || s.active.is_some() || s.layout_pending.is_some() {
             self.drop_renderer();
         } else if let Some(r) = self.renderer.as_mut() {
             r.send(&ToRenderer::EndSession);
@@ -447,9 +434,7 @@ impl SceneRunner {
 
         let end = s.result_at.unwrap_or_else(Instant::now);
         let wall = end - started;
-        let waiting = s.waiting
-            + s.waiting_since
-                .map_or(Duration::ZERO, |w| end.saturating_duration_since(w));
+        let waiting = s.waiting + s.waiting_since.map_or(Duration::ZERO, |w| end.saturating_duration_since(w));
         outcome.times = Times {
             technique_ms: ms(wall.saturating_sub(waiting)),
             waiting_ms: ms(waiting),
@@ -467,24 +452,24 @@ impl SceneRunner {
         outcome
     }
 
-    fn wait_technique_exit(&self, generation: u64, within: Duration) -> Option<ExitInfo> {
-        wait_exit(&self.rx, within, |e| match e {
-            Event::TechniqueExited(g, info) if g == generation => Some(info),
+    fn wait_technique_exit(&mut self, generation: u64, within: Duration) -> Option<ExitInfo> {
+        match self.inbox.wait_for(within, |e| matches!(e, Event::TechniqueExited(g, _) if *g == generation)) {
+            Some(Event::TechniqueExited(_, info)) => Some(info),
             _ => None,
-        })
+        }
     }
 
-    fn wait_renderer_exit(&self, generation: u64, within: Duration) -> Option<ExitInfo> {
-        wait_exit(&self.rx, within, |e| match e {
-            Event::RendererExited(g, info) if g == generation => Some(info),
+    fn wait_renderer_exit(&mut self, generation: u64, within: Duration) -> Option<ExitInfo> {
+        match self.inbox.wait_for(within, |e| matches!(e, Event::RendererExited(g, _) if *g == generation)) {
+            Some(Event::RendererExited(_, info)) => Some(info),
             _ => None,
-        })
+        }
     }
 
     fn event_loop(
         &mut self,
         s: &mut Session,
-        result: &SharedRegion,
+        result: &std::fs::File,
         deadline: Option<Instant>,
         progress: &mut dyn FnMut(u64, u64),
     ) -> (RunStatus, String) {
@@ -495,35 +480,19 @@ impl SceneRunner {
         let mut grace_deadline: Option<Instant> = None;
         loop {
             let wake = [deadline, grace_deadline].into_iter().flatten().min();
-            let event = match wake {
-                Some(t) => match self
-                    .rx
-                    .recv_timeout(t.saturating_duration_since(Instant::now()))
-                {
-                    Ok(e) => e,
-                    Err(RecvTimeoutError::Timeout) => {
-                        if let Some(v) = verdict {
-                            return v;
-                        }
-                        if grace_deadline.is_some_and(|g| Instant::now() >= g) {
-                            return (
-                                RunStatus::NoResult,
-                                "the technique closed its connection without sending a result"
-                                    .into(),
-                            );
-                        }
-                        return s.timeout_verdict(self.limits.time_limit.unwrap_or_default());
-                    }
-                    Err(RecvTimeoutError::Disconnected) => {
-                        unreachable!("the runner holds a sender")
-                    }
-                },
-                None => self.rx.recv().expect("the runner holds a sender"),
+            let Some(event) = self.inbox.next(wake) else {
+                if let Some(v) = verdict {
+                    return v;
+                }
+                if grace_deadline.is_some_and(|g| Instant::now() >= g) {
+                    return (
+                        RunStatus::NoResult,
+                        "the technique closed its connection without sending a result".into(),
+                    );
+                }
+                return s.timeout_verdict(self.limits.time_limit.unwrap_or_default());
             };
-            let renderer = self
-                .renderer
-                .as_mut()
-                .expect("a session runs with a renderer");
+            let renderer = self.renderer.as_mut().expect("a session runs with a renderer");
             let end = match event {
                 Event::Connected(stream, hello) => {
                     s.connect(stream, hello, &self.tx);
@@ -536,20 +505,14 @@ impl SceneRunner {
                         grace_deadline.get_or_insert(Instant::now() + Duration::from_secs(3));
                         None
                     }
-                    Err(e) => Some((
-                        RunStatus::ProtocolError,
-                        format!("technique connection: {e}"),
-                    )),
+                    Err(e) => Some((RunStatus::ProtocolError, format!("technique connection: {e}"))),
                 },
                 Event::Renderer(g, message) if g == renderer.generation => match message {
                     Ok(Some(m)) => {
                         let end = s.on_renderer(m, renderer);
                         if last_report.elapsed() >= Duration::from_millis(250) {
                             last_report = Instant::now();
-                            progress(
-                                s.used + s.active.as_ref().map_or(0, |a| a.delivered),
-                                s.budget,
-                            );
+                            progress(s.used + s.active.as_ref().map_or(0, |a| a.delivered), s.budget);
                         }
                         end
                     }
@@ -557,24 +520,17 @@ impl SceneRunner {
                         s.renderer_broken = true;
                         let generation = renderer.generation;
                         // The exit status says more than the hang-up: wait a moment for it.
-                        let why = match self.wait_renderer_exit(generation, Duration::from_secs(2))
-                        {
+                        let why = match self.wait_renderer_exit(generation, Duration::from_secs(2)) {
                             Some(info) => {
                                 format!("the renderer died ({}) during the run", info.describe())
                             }
                             None => "the renderer closed its connection".into(),
                         };
-                        Some((
-                            RunStatus::RendererFailed,
-                            format!("{why}{}", log_note(self.renderer_log.as_deref())),
-                        ))
+                        Some((RunStatus::RendererFailed, format!("{why}{}", log_note(self.renderer_log.as_deref()))))
                     }
                     Err(e) => {
                         s.renderer_broken = true;
-                        Some((
-                            RunStatus::RendererFailed,
-                            format!("renderer connection: {e}"),
-                        ))
+                        Some((RunStatus::RendererFailed, format!("renderer connection: {e}")))
                     }
                 },
                 Event::TechniqueExited(g, info) if g == s.generation => {
@@ -584,10 +540,7 @@ impl SceneRunner {
                         return v;
                     }
                     Some(if status.success() {
-                        (
-                            RunStatus::NoResult,
-                            "the technique exited (exit code 0) without sending a result".into(),
-                        )
+                        (RunStatus::NoResult, "the technique exited (exit code 0) without sending a result".into())
                     } else {
                         (
                             RunStatus::Crashed,
@@ -653,24 +606,11 @@ fn log_note(log: Option<&Path>) -> String {
     }
 }
 
-/// Waits up to `within` for the event `pick` selects, dropping others
-/// (the run they belong to is ending).
-fn wait_exit(
-    rx: &Receiver<Event>,
-    within: Duration,
-    pick: impl Fn(Event) -> Option<ExitInfo>,
-) -> Option<ExitInfo> {
-    let deadline = Instant::now() + within;
-    loop {
-        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-            Ok(e) => {
-                if let Some(info) = pick(e) {
-                    return Some(info);
-                }
-            }
-            Err(_) => return None,
-        }
-    }
+fn launch_failed(mut outcome: RunOutcome, message: String, result_path: &Path) -> RunOutcome {
+    let _ = std::fs::remove_file(result_path);
+    outcome.status = RunStatus::LaunchFailed;
+    outcome.message = message;
+    outcome
 }
 
 fn ms(d: Duration) -> f64 {
@@ -710,13 +650,7 @@ fn refuse(stream: &mut UnixStream, why: &str) {
 }
 
 fn refuse_kind(stream: &mut UnixStream, kind: ErrorKind, why: &str) {
-    let _ = write_frame(
-        stream,
-        &ToTechnique::Error {
-            kind,
-            message: why.to_string(),
-        },
-    );
+    let _ = write_frame(stream, &ToTechnique::Error { kind, message: why.to_string() });
 }
 
 fn spawn_reader<T, F>(stream: UnixStream, tx: Sender<Event>, wrap: F)
@@ -765,6 +699,8 @@ type End = Option<(RunStatus, String)>;
 
 /// The state of one technique session.
 struct Session {
+    /// The token a spawned technique must present (none in debug mode).
+    token: Option<String>,
     dir: PathBuf,
     id: u64,
     generation: u64,
@@ -807,9 +743,12 @@ impl Session {
             return refuse(&mut stream, "a renderer is already connected to this run");
         }
         if self.writer.is_some() {
+            return refuse(&mut stream, "another technique is already connected to this run");
+        }
+        if self.token.is_some() && hello.session != self.token {
             return refuse(
                 &mut stream,
-                "another technique is already connected to this run",
+                "this connection is not the technique started for the current run (FBKSD_SESSION missing or wrong)",
             );
         }
         let Ok(mut writer) = stream.try_clone() else {
@@ -839,10 +778,7 @@ impl Session {
 
     /// Ends the session with an error the technique is told about too.
     fn refuse(&mut self, status: RunStatus, kind: ErrorKind, message: String) -> End {
-        self.send(&ToTechnique::Error {
-            kind,
-            message: message.clone(),
-        });
+        self.send(&ToTechnique::Error { kind, message: message.clone() });
         Some((status, message))
     }
 
@@ -852,19 +788,18 @@ impl Session {
 
     fn renderer_failed(&mut self, message: String) -> End {
         self.renderer_broken = true;
-        self.refuse(
-            RunStatus::RendererFailed,
-            ErrorKind::RendererFailed,
-            message,
-        )
+        self.refuse(RunStatus::RendererFailed, ErrorKind::RendererFailed, message)
     }
 
     fn timeout_verdict(&self, limit: Duration) -> (RunStatus, String) {
         let limit = humantime::format_duration(limit);
         if self.writer.is_none() {
+            return (RunStatus::Timeout, format!("the technique did not connect within the time limit of {limit}"));
+        }
+        if self.layout_pending.is_some() {
             return (
-                RunStatus::Timeout,
-                format!("the technique did not connect within the time limit of {limit}"),
+                RunStatus::RendererFailed,
+                format!("the time limit of {limit} expired while the renderer was still accepting the layout"),
             );
         }
         match &self.active {
@@ -901,34 +836,18 @@ impl Session {
         self.slots.get(slot as usize).copied()
     }
 
-    fn on_technique(
-        &mut self,
-        message: FromTechnique,
-        renderer: &mut RendererConn,
-        result: &SharedRegion,
-    ) -> End {
+    fn on_technique(&mut self, message: FromTechnique, renderer: &mut RendererConn, result: &std::fs::File) -> End {
         match message {
             FromTechnique::SetLayout { layout } => {
                 if self.layout.is_some() || self.layout_pending.is_some() {
-                    return self
-                        .protocol_error("set_layout may be called only once per run".into());
+                    return self.protocol_error("set_layout may be called only once per run".into());
                 }
                 let compiled = match layout.compile() {
                     Ok(c) => c,
-                    Err(e) => {
-                        return self.refuse(
-                            RunStatus::InvalidLayout,
-                            ErrorKind::InvalidLayout,
-                            e.to_string(),
-                        )
-                    }
+                    Err(e) => return self.refuse(RunStatus::InvalidLayout, ErrorKind::InvalidLayout, e.to_string()),
                 };
                 let sample_bytes = compiled.sample_size() as u64 * 4;
-                let slot_count = std::thread::available_parallelism()
-                    .map_or(2, |n| n.get())
-                    .clamp(2, 7) as u32
-                    * 2
-                    + 2;
+                let slot_count = std::thread::available_parallelism().map_or(2, |n| n.get()).clamp(2, 7) as u32 * 2 + 2;
                 // A slot holds at least one pixel at the full budget, so any SPP
                 // tile fits; it need not hold more than the whole budget spread
                 // over the ring (small images get small rings).
@@ -938,33 +857,25 @@ impl Session {
                     .min(whole_budget)
                     .max(self.spp.max(1) * sample_bytes)
                     .next_multiple_of(4096);
-                let spec = RingSpec {
-                    session: self.id,
-                    slot_count,
-                    slot_bytes,
-                };
+                let spec = RingSpec { session: self.id, slot_count, slot_bytes };
                 if let Err(e) = Ring::create_file(&self.dir, spec) {
                     return self.renderer_failed(format!("cannot create the sample ring: {e}"));
                 }
                 self.pipe_size = spec.slot_samples(compiled.sample_size());
                 self.slots = vec![Slot::Free; slot_count as usize];
                 self.free = (0..slot_count).collect();
-                renderer.send(&ToRenderer::SetLayout {
-                    layout: compiled.source().clone(),
-                    ring: spec,
-                });
+                renderer.send(&ToRenderer::SetLayout { layout: compiled.source().clone(), ring: spec });
                 self.ring = Some(spec);
                 self.layout_pending = Some((compiled, spec));
+                // The technique now waits for the renderer: not its time.
+                self.waiting_since = Some(Instant::now());
                 None
             }
-            FromTechnique::Evaluate { amount, input } => {
-                self.start_request(amount, input, renderer)
-            }
+            FromTechnique::Evaluate { amount, input } => self.start_request(amount, input, renderer),
             FromTechnique::Produced { slot } => {
                 let Some(Slot::Producing { id, tile }) = self.slot_state(slot) else {
-                    return self.protocol_error(format!(
-                        "produced slot {slot}, which the technique was not asked to fill"
-                    ));
+                    return self
+                        .protocol_error(format!("produced slot {slot}, which the technique was not asked to fill"));
                 };
                 self.slots[slot as usize] = Slot::Rendering { tile };
                 self.take_back_from_technique();
@@ -973,9 +884,7 @@ impl Session {
             }
             FromTechnique::Consumed { slot } => {
                 let Some(Slot::Consuming) = self.slot_state(slot) else {
-                    return self.protocol_error(format!(
-                        "consumed slot {slot}, which the technique did not hold"
-                    ));
+                    return self.protocol_error(format!("consumed slot {slot}, which the technique did not hold"));
                 };
                 self.slots[slot as usize] = Slot::Free;
                 self.free.push_back(slot);
@@ -985,11 +894,7 @@ impl Session {
                 }
                 self.check_complete()
             }
-            FromTechnique::SendResult {
-                width,
-                height,
-                channels,
-            } => {
+            FromTechnique::SendResult { width, height, channels } => {
                 if self.active.is_some() {
                     return self.protocol_error("send_result during a sample request".into());
                 }
@@ -1004,8 +909,16 @@ impl Session {
                     );
                 }
                 self.result_at = Some(Instant::now());
-                // SAFETY: the technique handed the result buffer over with this message.
-                let pixels = unsafe { result.floats(0, result.len() / 4) }.to_vec();
+                let mut bytes = vec![0u8; self.width as usize * self.height as usize * 12];
+                if let Err(e) = std::os::unix::fs::FileExt::read_exact_at(result, &mut bytes, 0) {
+                    return self.refuse(
+                        RunStatus::InvalidOutput,
+                        ErrorKind::InvalidOutput,
+                        format!("the result buffer could not be read (was it truncated?): {e}"),
+                    );
+                }
+                let pixels: Vec<f32> =
+                    bytes.chunks_exact(4).map(|b| f32::from_ne_bytes([b[0], b[1], b[2], b[3]])).collect();
                 let bad = pixels.iter().filter(|v| !v.is_finite()).count();
                 let first_bad = pixels.iter().position(|v| !v.is_finite());
                 self.image = Some(pixels);
@@ -1055,7 +968,9 @@ impl Session {
         };
         let remaining = self.budget - self.used;
         let samples = match samples {
-            Some(0) => return self.refuse(RunStatus::ProtocolError, ErrorKind::BadRequest, "a request for 0 samples".into()),
+            Some(0) => {
+                return self.refuse(RunStatus::ProtocolError, ErrorKind::BadRequest, "a request for 0 samples".into())
+            }
             Some(s) if s <= remaining => s,
             _ => {
                 return self.refuse(
@@ -1114,14 +1029,13 @@ impl Session {
         match message {
             FromRenderer::LayoutAccepted => {
                 let Some((compiled, ring)) = self.layout_pending.take() else {
-                    return self
-                        .renderer_failed("the renderer accepted a layout nobody set".into());
+                    return self.renderer_failed("the renderer accepted a layout nobody set".into());
                 };
-                self.send(&ToTechnique::LayoutSet {
-                    ring,
-                    sample_size: compiled.sample_size() as u32,
-                });
+                self.send(&ToTechnique::LayoutSet { ring, sample_size: compiled.sample_size() as u32 });
                 self.layout = Some(compiled);
+                if let Some(since) = self.waiting_since.take() {
+                    self.waiting += since.elapsed();
+                }
                 None
             }
             FromRenderer::Failed { message } if self.layout_pending.is_some() => {
@@ -1132,14 +1046,10 @@ impl Session {
                     format!("the renderer rejected the layout: {message}"),
                 )
             }
-            FromRenderer::Failed { message } => {
-                self.renderer_failed(format!("the renderer failed: {message}"))
-            }
+            FromRenderer::Failed { message } => self.renderer_failed(format!("the renderer failed: {message}")),
             FromRenderer::Acquire { id, tile } => {
                 if let Err(why) = self.check_tile(&tile) {
-                    return self.renderer_failed(format!(
-                        "the renderer asked for an invalid tile {tile:?}: {why}"
-                    ));
+                    return self.renderer_failed(format!("the renderer asked for an invalid tile {tile:?}: {why}"));
                 }
                 if self.free.is_empty() {
                     self.queued.push_back((id, tile));
@@ -1150,9 +1060,7 @@ impl Session {
             }
             FromRenderer::Filled { slot, count } => {
                 let Some(Slot::Rendering { tile }) = self.slot_state(slot) else {
-                    return self.renderer_failed(format!(
-                        "the renderer filled slot {slot}, which it did not hold"
-                    ));
+                    return self.renderer_failed(format!("the renderer filled slot {slot}, which it did not hold"));
                 };
                 if count != tile.sample_count() {
                     return self.renderer_failed(format!(
@@ -1169,8 +1077,7 @@ impl Session {
             }
             FromRenderer::EvaluateDone => {
                 let Some(a) = self.active.as_mut() else {
-                    return self
-                        .renderer_failed("the renderer finished a request nobody made".into());
+                    return self.renderer_failed("the renderer finished a request nobody made".into());
                 };
                 a.renderer_done = true;
                 if let Some(t) = self.render_started.take() {
@@ -1178,9 +1085,7 @@ impl Session {
                 }
                 self.check_complete()
             }
-            FromRenderer::Ready { .. } => {
-                self.renderer_failed("the renderer sent ready twice".into())
-            }
+            FromRenderer::Ready { .. } => self.renderer_failed("the renderer sent ready twice".into()),
         }
     }
 
@@ -1195,26 +1100,17 @@ impl Session {
         match tile {
             Tile::Pixels { rect, spp } => {
                 if *spp as u64 != a.spp || !rect.is_inside(self.width, self.height) {
-                    return Err(format!(
-                        "request is {} spp on {}×{}",
-                        a.spp, self.width, self.height
-                    ));
+                    return Err(format!("request is {} spp on {}×{}", a.spp, self.width, self.height));
                 }
                 a.pixel_acquired += n;
                 if a.pixel_acquired > a.pixel_expected {
-                    return Err(format!(
-                        "more pixel samples than the {} requested",
-                        a.pixel_expected
-                    ));
+                    return Err(format!("more pixel samples than the {} requested", a.pixel_expected));
                 }
             }
             Tile::Samples { .. } => {
                 a.free_acquired += n;
                 if a.free_acquired > a.free_expected {
-                    return Err(format!(
-                        "more free samples than the {} requested",
-                        a.free_expected
-                    ));
+                    return Err(format!("more free samples than the {} requested", a.free_expected));
                 }
             }
         }
@@ -1223,31 +1119,15 @@ impl Session {
 
     fn check_complete(&mut self) -> End {
         let Some(a) = &self.active else { return None };
-        if !a.renderer_done
-            || self
-                .slots
-                .iter()
-                .any(|s| !matches!(s, Slot::Free | Slot::Rendering { .. }))
-        {
+        if !a.renderer_done || self.slots.iter().any(|s| !matches!(s, Slot::Free | Slot::Rendering { .. })) {
             return None;
         }
-        if self
-            .slots
-            .iter()
-            .any(|s| matches!(s, Slot::Rendering { .. }))
-            || !self.queued.is_empty()
-        {
-            return self.renderer_failed(
-                "the renderer reported the request done with tiles acquired but never filled"
-                    .into(),
-            );
+        if self.slots.iter().any(|s| matches!(s, Slot::Rendering { .. })) || !self.queued.is_empty() {
+            return self
+                .renderer_failed("the renderer reported the request done with tiles acquired but never filled".into());
         }
         if a.delivered != a.expected() {
-            let msg = format!(
-                "the renderer finished a request with {} of its {} samples",
-                a.delivered,
-                a.expected()
-            );
+            let msg = format!("the renderer finished a request with {} of its {} samples", a.delivered, a.expected());
             return self.renderer_failed(msg);
         }
         let delivered = a.delivered;
@@ -1257,10 +1137,7 @@ impl Session {
             self.waiting += since.elapsed();
         }
         let remaining = self.budget - self.used;
-        self.send(&ToTechnique::EvaluateDone {
-            delivered,
-            remaining,
-        });
+        self.send(&ToTechnique::EvaluateDone { delivered, remaining });
         None
     }
 }

@@ -80,15 +80,8 @@ impl SceneMeta {
     /// Reads a scene directory's metadata (or the file itself) and checks it
     /// against the scene file.
     pub fn load(path: &Path) -> Result<SceneMeta, MetaError> {
-        let file = if path.is_dir() {
-            path.join(META_FILE)
-        } else {
-            path.to_path_buf()
-        };
-        let fail = |message: String| MetaError {
-            file: file.display().to_string(),
-            message,
-        };
+        let file = if path.is_dir() { path.join(META_FILE) } else { path.to_path_buf() };
+        let fail = |message: String| MetaError { file: file.display().to_string(), message };
         let text = std::fs::read_to_string(&file).map_err(|e| fail(e.to_string()))?;
         let mut meta: SceneMeta = serde_json::from_str(&text).map_err(|e| fail(e.to_string()))?;
         meta.dir = file.parent().unwrap_or(Path::new(".")).to_path_buf();
@@ -96,10 +89,7 @@ impl SceneMeta {
             return Err(fail("spp must list positive budgets".into()));
         }
         if !["experimental", "production"].contains(&meta.category.as_str()) {
-            return Err(fail(format!(
-                "category must be experimental or production, not {:?}",
-                meta.category
-            )));
+            return Err(fail(format!("category must be experimental or production, not {:?}", meta.category)));
         }
         if meta.width == 0 || meta.height == 0 {
             return Err(fail("width and height must be positive".into()));

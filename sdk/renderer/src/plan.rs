@@ -40,12 +40,7 @@ pub fn plan_tiles(
         let spp = spp as u32;
         for y0 in (0..height).step_by(th as usize) {
             for x0 in (0..width).step_by(tw as usize) {
-                let rect = TileRect {
-                    x0,
-                    y0,
-                    x1: (x0 + tw).min(width),
-                    y1: (y0 + th).min(height),
-                };
+                let rect = TileRect { x0, y0, x1: (x0 + tw).min(width), y1: (y0 + th).min(height) };
                 tiles.push(Tile::Pixels { rect, spp });
             }
         }
@@ -72,18 +67,13 @@ mod tests {
 
     #[test]
     fn covers_every_pixel_exactly_once() {
-        for &(w, h, spp, pipe) in &[
-            (37u32, 23u32, 3u64, 1000u64),
-            (1, 1, 1, 1),
-            (64, 64, 4096, 4096),
-            (500, 500, 1, 1 << 20),
-        ] {
+        for &(w, h, spp, pipe) in
+            &[(37u32, 23u32, 3u64, 1000u64), (1, 1, 1, 1), (64, 64, 4096, 4096), (500, 500, 1, 1 << 20)]
+        {
             let tiles = plan_tiles(w, h, spp, 0, 16, pipe, 2);
             let mut seen = vec![0u32; (w * h) as usize];
             for t in &tiles {
-                let Tile::Pixels { rect, spp: s } = t else {
-                    panic!()
-                };
+                let Tile::Pixels { rect, spp: s } = t else { panic!() };
                 assert_eq!(*s as u64, spp);
                 assert!(t.sample_count() <= pipe, "{t:?} exceeds pipe {pipe}");
                 for y in rect.y0..rect.y1 {
@@ -99,11 +89,7 @@ mod tests {
     #[test]
     fn low_spp_tiles_grow_but_keep_parallelism() {
         let tiles = plan_tiles(1920, 1080, 1, 0, 16, 1 << 20, 2);
-        assert!(
-            tiles.len() >= 16 && tiles.len() < (1920 / 16) * (1080 / 16),
-            "{}",
-            tiles.len()
-        );
+        assert!(tiles.len() >= 16 && tiles.len() < (1920 / 16) * (1080 / 16), "{}", tiles.len());
     }
 
     #[test]

@@ -2,9 +2,7 @@
 
 use crate::plan::plan_tiles;
 use fbksd_core::layout::{CompiledLayout, Element, ElementIo};
-use fbksd_core::protocol::{
-    read_frame, write_frame, FrameError, FromRenderer, Hello, Role, ToRenderer,
-};
+use fbksd_core::protocol::{read_frame, write_frame, FrameError, FromRenderer, Hello, Role, ToRenderer};
 use fbksd_core::shm::{Ring, ShmError};
 use fbksd_core::{rendezvous, Feature, RandomParameter, SceneInfo, SceneInfoError, Tile};
 use std::collections::HashMap;
@@ -19,10 +17,7 @@ use std::thread::JoinHandle;
 #[derive(Debug, thiserror::Error)]
 pub enum RendererError {
     /// The process was not started by a manager.
-    #[error(
-        "{} is not set: renderers are started by `fbksd run` (or a technique in debug mode)",
-        rendezvous::ENV_VAR
-    )]
+    #[error("{} is not set: renderers are started by `fbksd run` (or a technique in debug mode)", rendezvous::ENV_VAR)]
     NoRendezvous,
     /// The control connection failed.
     #[error("control connection: {0}")]
@@ -98,10 +93,7 @@ impl RenderingServer {
 
     /// Called with the (validated) layout when a technique session starts.
     /// An error rejects the layout; the technique sees its message.
-    pub fn on_set_parameters(
-        mut self,
-        f: impl FnMut(&CompiledLayout) -> Result<(), BoxError> + 'static,
-    ) -> Self {
+    pub fn on_set_parameters(mut self, f: impl FnMut(&CompiledLayout) -> Result<(), BoxError> + 'static) -> Self {
         self.set_parameters = Box::new(f);
         self
     }
@@ -132,28 +124,17 @@ impl RenderingServer {
     pub fn run_at(mut self, dir: &Path) -> Result<(), RendererError> {
         let stream = UnixStream::connect(rendezvous::control_socket(dir))?;
         let mut reader = BufReader::new(stream.try_clone()?);
-        let link = Arc::new(Link {
-            writer: Mutex::new(stream),
-            pending: Mutex::default(),
-            next_id: AtomicU64::new(0),
-        });
+        let link = Arc::new(Link { writer: Mutex::new(stream), pending: Mutex::default(), next_id: AtomicU64::new(0) });
         link.send(&Hello::new(Role::Renderer))?;
         match read_frame::<_, ToRenderer>(&mut reader)? {
             Some(ToRenderer::Welcome { .. }) => {}
             None => return Err(RendererError::ManagerClosed),
-            Some(other) => {
-                return Err(RendererError::Protocol(format!(
-                    "expected welcome, got {other:?}"
-                )))
-            }
+            Some(other) => return Err(RendererError::Protocol(format!("expected welcome, got {other:?}"))),
         }
         let scene_info = (self.scene_info)();
         let (width, height) = (scene_info.width()?, scene_info.height()?);
         let tile_size = (self.tile_size)().max(1);
-        link.send(&FromRenderer::Ready {
-            tile_size,
-            scene_info,
-        })?;
+        link.send(&FromRenderer::Ready { tile_size, scene_info })?;
 
         let result = self.serve(dir, &mut reader, &link, width, height, tile_size);
         // Wake any pipe still waiting for a slot: the session is over.
@@ -190,18 +171,10 @@ impl RenderingServer {
                             session = Some(s);
                             link.send(&FromRenderer::LayoutAccepted)?;
                         }
-                        Err(e) => link.send(&FromRenderer::Failed {
-                            message: format!("layout rejected: {e}"),
-                        })?,
+                        Err(e) => link.send(&FromRenderer::Failed { message: format!("layout rejected: {e}") })?,
                     }
                 }
-                ToRenderer::Evaluate {
-                    spp,
-                    remaining,
-                    pipe_size,
-                    input,
-                    request,
-                } => {
+                ToRenderer::Evaluate { spp, remaining, pipe_size, input, request } => {
                     join(&mut worker);
                     let Some((layout, ring)) = session.clone() else {
                         return Err(RendererError::Protocol("evaluate before set_layout".into()));
@@ -222,18 +195,11 @@ impl RenderingServer {
                     };
                     let evaluate = self.evaluate.clone();
                     worker = Some(std::thread::spawn(move || {
-                        let outcome =
-                            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                                evaluate(&eval)
-                            }));
+                        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| evaluate(&eval)));
                         let message = match outcome {
                             Ok(Ok(())) => FromRenderer::EvaluateDone,
-                            Ok(Err(e)) => FromRenderer::Failed {
-                                message: e.to_string(),
-                            },
-                            Err(panic) => FromRenderer::Failed {
-                                message: format!("panicked: {}", panic_text(&panic)),
-                            },
+                            Ok(Err(e)) => FromRenderer::Failed { message: e.to_string() },
+                            Err(panic) => FromRenderer::Failed { message: format!("panicked: {}", panic_text(&panic)) },
                         };
                         let _ = eval.link.send(&message);
                     }));
@@ -252,9 +218,7 @@ impl RenderingServer {
                     (self.finish)();
                     return Ok(());
                 }
-                ToRenderer::Welcome { .. } => {
-                    return Err(RendererError::Protocol("second welcome".into()))
-                }
+                ToRenderer::Welcome { .. } => return Err(RendererError::Protocol("second welcome".into())),
             }
         }
     }
@@ -344,15 +308,7 @@ impl Evaluation {
     /// machine's number of threads.
     pub fn plan(&self) -> Vec<Tile> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        plan_tiles(
-            self.width,
-            self.height,
-            self.spp,
-            self.remaining,
-            self.tile_size,
-            self.pipe_size,
-            threads,
-        )
+        plan_tiles(self.width, self.height, self.spp, self.remaining, self.tile_size, self.pipe_size, threads)
     }
 
     /// Acquires a slot for `tile`, blocking until one is free (and, for
@@ -360,10 +316,7 @@ impl Evaluation {
     pub fn pipe(&self, tile: Tile) -> Result<SamplesPipe<'_>, RendererError> {
         let samples = tile.sample_count();
         if samples > self.pipe_size {
-            return Err(RendererError::PipeTooLarge {
-                samples,
-                pipe_size: self.pipe_size,
-            });
+            return Err(RendererError::PipeTooLarge { samples, pipe_size: self.pipe_size });
         }
         let id = self.link.next_id.fetch_add(1, Ordering::Relaxed);
         let (tx, rx) = mpsc::sync_channel(1);
@@ -373,12 +326,7 @@ impl Evaluation {
         let floats = samples as usize * self.layout.sample_size();
         // SAFETY: the manager granted this slot to this pipe alone until `filled`.
         let data = unsafe { self.ring.slot_mut(slot, floats) };
-        Ok(SamplesPipe {
-            eval: self,
-            slot,
-            tile,
-            data,
-        })
+        Ok(SamplesPipe { eval: self, slot, tile, data })
     }
 }
 
@@ -412,19 +360,13 @@ impl<'a> SamplesPipe<'a> {
     pub fn sample(&mut self, index: u64) -> SampleBuffer<'_> {
         let size = self.eval.layout.sample_size();
         let start = index as usize * size;
-        SampleBuffer {
-            data: &mut self.data[start..start + size],
-            params: &self.eval.params,
-            layout: &self.eval.layout,
-        }
+        SampleBuffer { data: &mut self.data[start..start + size], params: &self.eval.params, layout: &self.eval.layout }
     }
 
     /// The buffer of sample `s` of pixel `(x, y)` (pixel tiles only).
     #[inline]
     pub fn pixel_sample(&mut self, x: u32, y: u32, s: u32) -> SampleBuffer<'_> {
-        let Tile::Pixels { rect, spp } = self.tile else {
-            panic!("pixel_sample on a tile of free samples")
-        };
+        let Tile::Pixels { rect, spp } = self.tile else { panic!("pixel_sample on a tile of free samples") };
         self.sample(Tile::sample_index(&rect, spp, x, y, s) as u64)
     }
 
@@ -437,10 +379,7 @@ impl<'a> SamplesPipe<'a> {
     /// Hands the filled slot to the technique.
     pub fn finish(self) -> Result<(), RendererError> {
         let count = self.tile.sample_count();
-        self.eval.link.send(&FromRenderer::Filled {
-            slot: self.slot,
-            count,
-        })?;
+        self.eval.link.send(&FromRenderer::Filled { slot: self.slot, count })?;
         Ok(())
     }
 }

@@ -5,17 +5,13 @@
 
 use anyhow::{bail, ensure, Context};
 use fbksd_analytic_renderer::features;
-use fbksd_client::{
-    BenchmarkClient, ElementIo, ErrorKind, Feature, RandomParameter, SampleLayout, Spp,
-};
+use fbksd_client::{BenchmarkClient, ElementIo, ErrorKind, Feature, RandomParameter, SampleLayout, Spp};
 use fbksd_core::layout::Element;
 use fbksd_core::protocol::{read_frame, write_frame, FromTechnique, Hello, Role, ToTechnique};
 use std::os::unix::net::UnixStream;
 
 fn main() -> anyhow::Result<()> {
-    let mode = std::env::args()
-        .nth(1)
-        .context("usage: fbksd-test-technique <mode>")?;
+    let mode = std::env::args().nth(1).context("usage: fbksd-test-technique <mode>")?;
     match mode.as_str() {
         "all-elements" => all_elements(),
         "exact-budget" => exact_budget(),
@@ -44,16 +40,9 @@ fn main() -> anyhow::Result<()> {
             client.send_result()?;
             Ok(())
         }
-        "wrong-size" => raw_session(FromTechnique::SendResult {
-            width: 1,
-            height: 1,
-            channels: 3,
-        }),
+        "wrong-size" => raw_session(FromTechnique::SendResult { width: 1, height: 1, channels: 3 }),
         "duplicate-layout" => raw_session(FromTechnique::SetLayout {
-            layout: SampleLayout::new()
-                .with("COLOR_R")
-                .with("COLOR_G")
-                .with("COLOR_R"),
+            layout: SampleLayout::new().with("COLOR_R").with("COLOR_G").with("COLOR_R"),
         }),
         other => bail!("unknown mode {other:?}"),
     }
@@ -86,24 +75,14 @@ fn full_layout() -> SampleLayout {
 }
 
 /// Checks one sample against the analytic formulas; returns its params.
-fn check_sample(
-    sample: &[f32],
-    layout: &fbksd_core::CompiledLayout,
-    w: u32,
-    h: u32,
-) -> anyhow::Result<[f32; 7]> {
+fn check_sample(sample: &[f32], layout: &fbksd_core::CompiledLayout, w: u32, h: u32) -> anyhow::Result<[f32; 7]> {
     let mut params = [0f32; 7];
     for p in RandomParameter::ALL {
-        let i = layout
-            .parameter_offset(*p)
-            .context("layout lacks a parameter")?;
+        let i = layout.parameter_offset(*p).context("layout lacks a parameter")?;
         params[p.index()] = sample[i];
     }
     let (x, y) = (params[0], params[1]);
-    ensure!(
-        x >= 0.0 && x < w as f32 && y >= 0.0 && y < h as f32,
-        "IMAGE_X/Y ({x}, {y}) outside the image"
-    );
+    ensure!(x >= 0.0 && x < w as f32 && y >= 0.0 && y < h as f32, "IMAGE_X/Y ({x}, {y}) outside the image");
     for p in &params[2..] {
         ensure!((0.0..1.0).contains(p), "parameter {p} outside [0, 1)");
     }
@@ -122,11 +101,7 @@ fn check_sample(
 
 fn dims(client: &BenchmarkClient) -> anyhow::Result<(u32, u32, u64)> {
     let info = client.scene_info();
-    Ok((
-        info.get::<i64>("width")? as u32,
-        info.get::<i64>("height")? as u32,
-        info.get::<i64>("max_spp")? as u64,
-    ))
+    Ok((info.get::<i64>("width")? as u32, info.get::<i64>("height")? as u32, info.get::<i64>("max_spp")? as u64))
 }
 
 /// Every layout element, SPP requests: each sample is checked, each pixel
@@ -148,19 +123,13 @@ fn all_elements() -> anyhow::Result<()> {
                     let sample = tile.sample(x, y, s);
                     match check_sample(sample, &compiled, w, h) {
                         Ok(p) if p[0].floor() as u32 == x && p[1].floor() as u32 == y => {}
-                        Ok(p) => {
-                            error = Some(format!(
-                                "sample of pixel ({x}, {y}) lies at ({}, {})",
-                                p[0], p[1]
-                            ))
-                        }
+                        Ok(p) => error = Some(format!("sample of pixel ({x}, {y}) lies at ({}, {})", p[0], p[1])),
                         Err(e) => error = Some(e.to_string()),
                     }
                     let i = (y * w + x) as usize;
                     counts[i] += 1;
                     for c in 0..3 {
-                        sums[i * 3 + c] +=
-                            sample[compiled.feature_offset(Feature::ALL[c], 0).unwrap()] as f64;
+                        sums[i * 3 + c] += sample[compiled.feature_offset(Feature::ALL[c], 0).unwrap()] as f64;
                     }
                 }
             }
@@ -169,10 +138,7 @@ fn all_elements() -> anyhow::Result<()> {
     if let Some(e) = error {
         bail!(e);
     }
-    ensure!(
-        counts.iter().all(|&c| c as u64 == spp),
-        "some pixel did not get exactly {spp} samples"
-    );
+    ensure!(counts.iter().all(|&c| c as u64 == spp), "some pixel did not get exactly {spp} samples");
     ensure!(client.remaining_samples() == 0, "budget not spent");
     for (o, s) in client.result_buffer().iter_mut().zip(&sums) {
         *o = (s / spp as f64) as f32;
@@ -212,16 +178,8 @@ fn exact_budget() -> anyhow::Result<()> {
     if let Some(e) = error {
         return Err(e);
     }
-    ensure!(
-        seen == spp * pixels,
-        "saw {seen} samples, budget {}",
-        spp * pixels
-    );
-    ensure!(
-        client.remaining_samples() == 0,
-        "remaining {}",
-        client.remaining_samples()
-    );
+    ensure!(seen == spp * pixels, "saw {seen} samples, budget {}", spp * pixels);
+    ensure!(client.remaining_samples() == 0, "remaining {}", client.remaining_samples());
     client.send_result()?;
     Ok(())
 }
@@ -233,10 +191,7 @@ fn over_budget() -> anyhow::Result<()> {
     client.set_sample_layout(&SampleLayout::new().with("COLOR_R"))?;
     client.evaluate_samples(Spp(spp), |_| {})?;
     match client.evaluate_sample_count(1, |_| {}) {
-        Err(fbksd_client::ClientError::Refused {
-            kind: ErrorKind::OverBudget,
-            message,
-        }) => {
+        Err(fbksd_client::ClientError::Refused { kind: ErrorKind::OverBudget, message }) => {
             eprintln!("refused as expected: {message}");
             std::process::exit(0)
         }
@@ -249,27 +204,13 @@ fn input_layout() -> SampleLayout {
     for p in RandomParameter::ALL {
         layout = layout.with_io(p.name(), ElementIo::Input);
     }
-    layout
-        .with("COLOR_R")
-        .with("COLOR_G")
-        .with("COLOR_B")
-        .with("DEPTH")
-        .with_number("NORMAL_Z", 1)
-        .with("WORLD_Z_NS")
+    layout.with("COLOR_R").with("COLOR_G").with("COLOR_B").with("DEPTH").with_number("NORMAL_Z", 1).with("WORLD_Z_NS")
 }
 
 /// A deterministic position for sample `s` of pixel `(x, y)`.
 fn my_params(x: u32, y: u32, s: u32) -> [f32; 7] {
     let u = |k: u32| ((x * 7 + y * 13 + s * 31 + k * 17) % 97) as f32 / 97.0;
-    [
-        x as f32 + u(0),
-        y as f32 + u(1),
-        u(2),
-        u(3),
-        u(4),
-        u(5),
-        u(6),
-    ]
+    [x as f32 + u(0), y as f32 + u(1), u(2), u(3), u(4), u(5), u(6)]
 }
 
 /// INPUT parameters written per pixel; the renderer must use them.
@@ -299,9 +240,7 @@ fn input_spp() -> anyhow::Result<()> {
                         consumed += 1;
                         let sample = tile.sample(x, y, s);
                         if sample[..7] != my_params(x, y, s) {
-                            error = Some(format!(
-                                "INPUT parameters of ({x}, {y}, {s}) were overwritten"
-                            ));
+                            error = Some(format!("INPUT parameters of ({x}, {y}, {s}) were overwritten"));
                         } else if let Err(e) = check_sample(sample, &compiled, w, h) {
                             error = Some(e.to_string());
                         }
@@ -341,10 +280,7 @@ fn input_count() -> anyhow::Result<()> {
         |data| {
             for sample in data.chunks_exact(size) {
                 if sample[0] >= 1.0 || sample[1] >= 1.0 {
-                    error = Some(format!(
-                        "sample {consumed} not where the technique put it: {:?}",
-                        &sample[..2]
-                    ));
+                    error = Some(format!("sample {consumed} not where the technique put it: {:?}", &sample[..2]));
                 }
                 if let Err(e) = check_sample(sample, &compiled, w, h) {
                     error = Some(e.to_string());

@@ -16,22 +16,12 @@ fn main() -> anyhow::Result<()> {
     let spp = info.get::<i64>("max_spp")? as u64;
 
     // STEP 2: the sample layout: colour only (plus ballast when benchmarking).
-    let mut layout = SampleLayout::new()
-        .with("COLOR_R")
-        .with("COLOR_G")
-        .with("COLOR_B");
+    let mut layout = SampleLayout::new().with("COLOR_R").with("COLOR_G").with("COLOR_B");
     if std::env::var_os("FBKSD_BOX_EXTRA_FEATURES").is_some() {
-        for name in [
-            "DEPTH", "WORLD_X", "WORLD_Y", "WORLD_Z", "NORMAL_X", "NORMAL_Y", "NORMAL_Z",
-        ] {
+        for name in ["DEPTH", "WORLD_X", "WORLD_Y", "WORLD_Z", "NORMAL_X", "NORMAL_Y", "NORMAL_Z"] {
             layout = layout.with(name);
         }
-        for name in [
-            "TEXTURE_COLOR_R",
-            "TEXTURE_COLOR_G",
-            "TEXTURE_COLOR_B",
-            "DIRECT_LIGHT_R",
-        ] {
+        for name in ["TEXTURE_COLOR_R", "TEXTURE_COLOR_G", "TEXTURE_COLOR_B", "DIRECT_LIGHT_R"] {
             layout = layout.with(name);
         }
     }
