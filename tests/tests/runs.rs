@@ -140,6 +140,9 @@ fn a_renderer_that_delivers_too_few_samples_or_none_is_blamed() {
     let short = bench(dir.path(), vec![technique("all-elements")], &[1], &["--fault", "short"], 60);
     assert_status(&short[0], RunStatus::RendererFailed, "finished a request with");
     let dir = tempfile::tempdir().unwrap();
+    let twice = bench(dir.path(), vec![technique("all-elements")], &[1], &["--fault", "duplicate"], 60);
+    assert_status(&twice[0], RunStatus::RendererFailed, "pixel (0, 0) is in two tiles of the same request");
+    let dir = tempfile::tempdir().unwrap();
     let hang = bench(dir.path(), vec![technique("all-elements")], &[1], &["--fault", "hang"], 2);
     assert_status(&hang[0], RunStatus::RendererFailed, "while the technique waited for the renderer");
     let dir = tempfile::tempdir().unwrap();
@@ -208,4 +211,24 @@ fn a_scene_runner_serves_an_external_technique() {
     assert_eq!(outcome.status, RunStatus::Ok, "{}", outcome.message);
     assert_eq!(outcome.used_samples, 128);
     assert!(runner.finish().is_some(), "the renderer exits when told to finish");
+}
+
+#[test]
+fn a_renderer_stuck_on_the_layout_is_blamed_and_replaced() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = bench(dir.path(), vec![technique("all-elements")], &[1, 2], &["--fault", "hang-layout"], 2);
+    for r in &records {
+        assert_status(r, RunStatus::RendererFailed, "while the renderer was still accepting the layout");
+        // Waiting for the renderer is not the technique's time.
+        assert!(r.times.technique_ms < 1000.0, "technique charged {} ms", r.times.technique_ms);
+    }
+}
+
+#[test]
+fn a_connection_without_the_session_token_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = bench(dir.path(), vec![technique("no-token")], &[1], &[], 60);
+    assert_status(&records[0], RunStatus::NoResult, "");
+    let log = std::fs::read_to_string(dir.path().join("results/no-token/analytic/1_0_technique.log")).unwrap();
+    assert!(log.contains("FBKSD_SESSION missing or wrong"), "{log}");
 }

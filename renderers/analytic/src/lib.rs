@@ -12,7 +12,9 @@
 //! seeded from (pixel, sample index, dimension) — see [`draw`] — so any run
 //! is reproducible. Test faults: `--fault crash-at-spp=N` aborts when a
 //! request asks N spp, `--fault short` delivers one tile too few,
-//! `--fault hang` never delivers, `--fault exit-at-start` exits with code 3.
+//! `--fault hang` never delivers, `--fault exit-at-start` exits with code 3,
+//! `--fault hang-layout` never answers a layout, `--fault duplicate` sends
+//! the first tile twice and never the second.
 #![deny(missing_docs)]
 
 use fbksd_core::layout::{Element, ElementIo};
@@ -90,6 +92,10 @@ pub enum Fault {
     Hang,
     /// Exit with code 3 before connecting.
     ExitAtStart,
+    /// Never answer a layout.
+    HangLayout,
+    /// Deliver the first tile twice instead of the second.
+    Duplicate,
 }
 
 impl Fault {
@@ -99,11 +105,11 @@ impl Fault {
             "short" => Ok(Fault::Short),
             "hang" => Ok(Fault::Hang),
             "exit-at-start" => Ok(Fault::ExitAtStart),
-            _ => s
-                .strip_prefix("crash-at-spp=")
-                .and_then(|n| n.parse().ok())
-                .map(Fault::CrashAtSpp)
-                .ok_or_else(|| format!("unknown fault {s:?} (crash-at-spp=N, short, hang, exit-at-start)")),
+            "hang-layout" => Ok(Fault::HangLayout),
+            "duplicate" => Ok(Fault::Duplicate),
+            _ => s.strip_prefix("crash-at-spp=").and_then(|n| n.parse().ok()).map(Fault::CrashAtSpp).ok_or_else(|| {
+                format!("unknown fault {s:?} (crash-at-spp=N, short, hang, exit-at-start, hang-layout, duplicate)")
+            }),
         }
     }
 }
@@ -123,7 +129,7 @@ pub fn uniform(stream: u64, sample: u64, dimension: u64) -> f32 {
 }
 
 /// The renderer's own value of random parameter `p` for sample `s` of pixel
-/// `(x, y)` (stratified IMAGE_X/IMAGE_Y on a √spp grid, the rest uniform).
+/// `(x, y)` (IMAGE_X stratified in spp strata, the rest uniform).
 /// For free samples pass `pixel = None` and the request's sample index.
 pub fn draw(
     p: RandomParameter,
@@ -139,10 +145,10 @@ pub fn draw(
         Some((x, y)) => {
             let stream = (y as u64 * width as u64 + x as u64) << 8 | (request & 0xff);
             let u = uniform(stream, s, dim);
-            let n = (spp as f64).sqrt().ceil().max(1.0) as u64;
             match p {
-                RandomParameter::ImageX => x as f32 + (((s % n) as f32 + u) / n as f32).min(0.999_999_9),
-                RandomParameter::ImageY => y as f32 + ((((s / n) % n) as f32 + u) / n as f32).min(0.999_999_9),
+                // Stratified along x, uniform along y: unbiased for any spp.
+                RandomParameter::ImageX => x as f32 + ((s as f32 + u) / spp.max(1) as f32).min(0.999_999_9),
+                RandomParameter::ImageY => y as f32 + u.min(0.999_999_9),
                 _ => u,
             }
         }
@@ -242,6 +248,9 @@ pub fn evaluate(
     if fault == Some(Fault::Short) {
         plan.pop();
     }
+    if fault == Some(Fault::Duplicate) && plan.len() > 1 {
+        plan[1] = plan[0];
+    }
     let layout = eval.layout();
     let size = layout.sample_size();
     // The constant pattern: one template sample copied everywhere.
@@ -296,6 +305,12 @@ pub fn serve(scene: Scene, fault: Option<Fault>) -> Result<(), fbksd_renderer::R
     RenderingServer::new()
         .on_get_tile_size(move || tile)
         .on_get_scene_info(move || info.clone())
+        .on_set_parameters(move |_| {
+            while fault == Some(Fault::HangLayout) {
+                std::thread::sleep(std::time::Duration::from_secs(3600));
+            }
+            Ok(())
+        })
         .on_evaluate_samples(move |eval| evaluate(&scene, fault, eval))
         .run()
 }

@@ -612,8 +612,9 @@ impl Program {
         self.features.iter().map(|(f, n, _)| (*f, *n))
     }
 
-    /// The program cut down to what computes `wanted` features: top-level
-    /// statements that write nothing later needed are dropped.
+    /// The program cut down to what computes `wanted` features: statements
+    /// that write nothing later needed are dropped, also inside `if`
+    /// branches (loops are kept or dropped whole).
     pub fn specialise(&self, wanted: &[(Feature, u8)]) -> Program {
         let mut live: Vec<bool> = vec![false; self.slots];
         for (f, n) in wanted {
@@ -621,25 +622,58 @@ impl Program {
                 live[s] = true;
             }
         }
-        let mut kept = Vec::new();
-        for stmt in self.stmts.iter().rev() {
-            let (mut reads, mut writes) = (Vec::new(), Vec::new());
-            stmt_slots(stmt, &mut reads, &mut writes);
-            if writes.iter().any(|w| live[*w]) {
-                for r in reads {
-                    live[r] = true;
-                }
-                kept.push(stmt.clone());
-            }
-        }
-        kept.reverse();
-        Program { stmts: kept, ..self.clone() }
+        Program { stmts: slice(&self.stmts, &mut live), ..self.clone() }
     }
 
-    /// Number of top-level statements (for tests of specialisation).
+    /// Number of statements, nested ones included (for tests of specialisation).
     pub fn statement_count(&self) -> usize {
-        self.stmts.len()
+        fn count(stmts: &[CStmt]) -> usize {
+            stmts
+                .iter()
+                .map(|s| match s {
+                    CStmt::If { then, otherwise, .. } => 1 + count(then) + count(otherwise),
+                    CStmt::While { body, .. } => 1 + count(body),
+                    _ => 1,
+                })
+                .sum()
+        }
+        count(&self.stmts)
     }
+}
+
+/// The statements of `stmts` that contribute to slots in `live`, which
+/// grows by what they read (a backward pass; conservative: never shrinks).
+fn slice(stmts: &[CStmt], live: &mut [bool]) -> Vec<CStmt> {
+    let mut kept = Vec::new();
+    for stmt in stmts.iter().rev() {
+        if let CStmt::If { cond, then, otherwise } = stmt {
+            let (mut live_then, mut live_else) = (live.to_vec(), live.to_vec());
+            let (then, otherwise) = (slice(then, &mut live_then), slice(otherwise, &mut live_else));
+            if then.is_empty() && otherwise.is_empty() {
+                continue;
+            }
+            for ((l, t), e) in live.iter_mut().zip(&live_then).zip(&live_else) {
+                *l = *l || *t || *e;
+            }
+            let (mut reads, mut writes) = (Vec::new(), Vec::new());
+            expr_slots(cond, &mut reads, &mut writes);
+            for r in reads.into_iter().chain(writes) {
+                live[r] = true;
+            }
+            kept.push(CStmt::If { cond: cond.clone(), then, otherwise });
+            continue;
+        }
+        let (mut reads, mut writes) = (Vec::new(), Vec::new());
+        stmt_slots(stmt, &mut reads, &mut writes);
+        if writes.iter().any(|w| live[*w]) {
+            for r in reads {
+                live[r] = true;
+            }
+            kept.push(stmt.clone());
+        }
+    }
+    kept.reverse();
+    kept
 }
 
 /// The index of `a[k]` when `k` is a literal (possibly negated), floored.

@@ -63,9 +63,12 @@ impl Scene {
         let (mut width, mut height, mut spp) = (None, None, 64u32);
         for stmt in &header {
             let Stmt::Expr(Expr::Assign { target, op: None, value, pos }) = stmt else {
-                return Err(format!("{name}: the header holds only assignments like 'width := 512;'"));
+                let at = header_position(stmt).unwrap_or(origin);
+                return Err(render(SourceError::new(at, "the header holds only assignments like 'width := 512;'")));
             };
-            let Expr::Name(key, kpos) = &**target else { unreachable!("assignments target names") };
+            let Expr::Name(key, kpos) = &**target else {
+                return Err(render(SourceError::new(*pos, "the header assigns plain names: width, height, spp")));
+            };
             let v = constant(value)
                 .ok_or_else(|| render(SourceError::new(*pos, format!("'{key}' must be a constant number"))))?;
             let whole = |v: f64| -> Result<u32, String> {
@@ -120,6 +123,26 @@ impl Scene {
     /// A runtime error rendered with this scene's source.
     pub fn runtime_error(&self, pos: Pos, message: &str) -> String {
         SourceError::new(pos, message).render(&self.name, &self.source)
+    }
+}
+
+/// Where a header statement that is not an assignment starts, if known.
+fn header_position(stmt: &Stmt) -> Option<Pos> {
+    match stmt {
+        Stmt::Var { pos, .. } | Stmt::While { pos, .. } | Stmt::Break(pos) | Stmt::Continue(pos) => Some(*pos),
+        Stmt::Expr(e) => expr_position(e),
+        Stmt::If { cond, .. } => expr_position(cond),
+        Stmt::Block(b) => b.first().and_then(header_position),
+    }
+}
+
+fn expr_position(e: &Expr) -> Option<Pos> {
+    match e {
+        Expr::Name(_, p) | Expr::Index(_, _, p) | Expr::Call(_, _, p) => Some(*p),
+        Expr::Assign { pos, .. } => Some(*pos),
+        Expr::Neg(a) | Expr::Not(a) => expr_position(a),
+        Expr::Binary(_, a, _) | Expr::Ternary(a, _, _) => expr_position(a),
+        Expr::Num(_) => None,
     }
 }
 

@@ -292,10 +292,10 @@ impl Parser {
             if self.peek() == end || matches!(self.peek(), Tok::End) {
                 return Ok(out);
             }
-            let braced = self.is_sym("{") || self.is_word("if") || self.is_word("while") || self.is_word("for");
             out.push(self.statement()?);
-            // A statement ends at ';' or, after a braced body, anywhere.
-            if !self.eat_sym(";") && !braced && self.peek() != end {
+            // A statement ends at ';', or right after a closing brace.
+            let after_brace = self.at > 0 && self.tokens[self.at - 1].0 == Tok::Sym("}");
+            if !self.eat_sym(";") && !after_brace && self.peek() != end {
                 return Err(SourceError::new(self.pos(), format!("expected ';' but found {}", self.peek())));
             }
         }
@@ -608,6 +608,9 @@ mod tests {
             "only a variable, array element or feature can be assigned to"
         );
         assert!(parse("x := 1 y := 2").unwrap_err().message.contains("expected ';'"));
+        // An if without braces ends at ';' like any statement (it swallowed the next one).
+        assert!(parse("if (c) x := 1 y := 2").unwrap_err().message.contains("expected ';'"));
+        assert!(parse("if (c) { x := 1 } y := 2").is_ok());
     }
 
     #[test]

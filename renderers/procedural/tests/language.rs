@@ -193,6 +193,13 @@ fn a_layout_computes_only_what_it_asks() {
     assert_eq!(s.program.specialise(&[(Feature::Depth, 0)]).statement_count(), 2, "var c and DEPTH");
     assert_eq!(s.program.specialise(&[(Feature::ColorG, 0)]).statement_count(), 4, "a, b, COLOR_R, COLOR_G");
     assert_eq!(s.program.specialise(&[(Feature::NormalX, 0)]).statement_count(), 0);
+    // Inside if branches too: DEPTH is not computed when only colour is asked.
+    let s = scene("if (IMAGE_X > 1) { COLOR_R := 1; DEPTH := 2 } else { var d := 3; DEPTH := d; COLOR_R := 4 };");
+    assert_eq!(s.program.statement_count(), 6);
+    assert_eq!(s.program.specialise(&[(Feature::ColorR, 0)]).statement_count(), 3, "the if and one store per branch");
+    assert_eq!(s.program.specialise(&[(Feature::Depth, 0)]).statement_count(), 4, "the if, DEPTH, var d, DEPTH");
+    let r = run_lanes("if (IMAGE_X > 1) { COLOR_R := 1; DEPTH := 2 } else { COLOR_R := 4 };", 3);
+    assert_eq!(r.iter().map(|v| v[0]).collect::<Vec<_>>(), [4.0, 4.0, 1.0]);
 }
 
 #[test]
@@ -230,6 +237,8 @@ fn header_errors() {
     assert!(error("height := 4;\n#\nCOLOR_R := 1;").contains("the header must set 'width'"));
     assert!(error("width := 4.5; height := 4;\n#\n").contains("t.expr:1:7: 'width' must be a whole number"));
     assert!(error("width := 4; height := 4; depth := 3;\n#\n").contains("t.expr:1:26: unknown header key 'depth'"));
+    assert!(error("width[0] := 5; height := 4;\n#\n").contains("t.expr:1:10: the header assigns plain names"));
+    assert!(error("width := 4;\nheight = 4;\n#\n").contains("t.expr:2:1: the header holds only assignments"));
     let s = Scene::parse("t", "width := 2^9; height := 100 * 3;\n#\nCOLOR_R := 1;").unwrap();
     assert_eq!((s.width, s.height, s.spp), (512, 300, 64));
 }

@@ -123,7 +123,11 @@ fn transport(args: TransportArgs) -> anyhow::Result<()> {
         SAMPLE_FLOATS,
         bytes / 1e9
     );
-    println!("  throughput (request → last tile):  {:6.2} GB/s  = {:.2} × memcpy", transport / 1e9, transport / memcpy);
+    println!(
+        "  throughput (request → renderer done): {:6.2} GB/s  = {:.2} × memcpy",
+        transport / 1e9,
+        transport / memcpy
+    );
     println!(
         "  whole run incl. start-up:          {:6.2} GB/s  ({:.2} s)",
         bytes / wall.as_secs_f64() / 1e9,

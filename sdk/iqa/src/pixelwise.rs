@@ -122,8 +122,7 @@ pub fn tone_map(linear: f64) -> f64 {
 #[inline(always)]
 pub fn tone_map_f32(linear: f32) -> f32 {
     let table = power_table_f32();
-    // NaN fails both comparisons of clamp's max/min in this order and becomes 0.
-    let v = linear.max(0.0).min(1.0);
+    let v = linear.clamp(0.0, 1.0);
     let v = if v.is_nan() { 0.0 } else { v };
     let x = v.sqrt() * (TABLE_SIZE - 1) as f32;
     let i = (x as usize).min(TABLE_SIZE - 2);
@@ -164,6 +163,12 @@ pub(crate) fn count_nonfinite(reference: &Image, test: &Image) -> (u64, u64) {
     (count(reference), count(test))
 }
 
+/// Squared error of tone-mapped values.
+pub(crate) fn tone_mapped_squared(t: f64, r: f64) -> f64 {
+    let d = tone_map(t) - tone_map(r);
+    d * d
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -185,10 +190,4 @@ mod tests {
         assert_eq!((tone_map_f32(-1.0), tone_map_f32(2.0), tone_map_f32(f32::NAN)), (0.0, 255.0, 0.0));
         assert_eq!((tone_map(-1.0), tone_map(2.0), tone_map(f64::NAN)), (0.0, 255.0, 0.0));
     }
-}
-
-/// Squared error of tone-mapped values.
-pub(crate) fn tone_mapped_squared(t: f64, r: f64) -> f64 {
-    let d = tone_map(t) - tone_map(r);
-    d * d
 }

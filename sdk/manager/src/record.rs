@@ -56,16 +56,19 @@ impl fmt::Display for RunStatus {
 /// Times of one run, in milliseconds.
 ///
 /// `technique` is the honest one: wall time from starting the technique to
-/// its result, minus the time it spent waiting for samples (inside a request
-/// with no tile in its hands). Start-up is included (loading a model is part
-/// of a technique's cost) and also reported alone.
+/// its result, minus the time it spent waiting for the renderer (inside a
+/// request with no tile in its hands, or while the renderer accepts its
+/// layout). Start-up is included (loading a model is part of a technique's
+/// cost) and also reported alone.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Times {
     /// Technique time: `wall − waiting`.
     pub technique_ms: f64,
     /// Time the technique waited for the renderer.
     pub waiting_ms: f64,
-    /// Time the renderer spent on requests (request sent → renderer done).
+    /// Time the renderer spent on requests: from each request to the
+    /// renderer's `evaluate_done`. It includes time the renderer waited for
+    /// a free slot, i.e. for the technique to consume tiles.
     pub render_ms: f64,
     /// Start of the technique process → result (or end of run).
     pub wall_ms: f64,

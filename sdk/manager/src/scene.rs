@@ -679,6 +679,8 @@ enum Slot {
 }
 
 struct Active {
+    /// One bit per pixel: delivered by a pixel tile in this request.
+    covered: Vec<u64>,
     input: bool,
     spp: u64,
     pixel_expected: u64,
@@ -992,6 +994,7 @@ impl Session {
         };
         self.requests += 1;
         self.active = Some(Active {
+            covered: if spp > 0 { vec![0; (pixels as usize).div_ceil(64)] } else { Vec::new() },
             input,
             spp,
             pixel_expected: spp * pixels,
@@ -1105,6 +1108,15 @@ impl Session {
                 a.pixel_acquired += n;
                 if a.pixel_acquired > a.pixel_expected {
                     return Err(format!("more pixel samples than the {} requested", a.pixel_expected));
+                }
+                for y in rect.y0..rect.y1 {
+                    for x in rect.x0..rect.x1 {
+                        let i = y as usize * self.width as usize + x as usize;
+                        if a.covered[i / 64] & (1 << (i % 64)) != 0 {
+                            return Err(format!("pixel ({x}, {y}) is in two tiles of the same request"));
+                        }
+                        a.covered[i / 64] |= 1 << (i % 64);
+                    }
                 }
             }
             Tile::Samples { .. } => {

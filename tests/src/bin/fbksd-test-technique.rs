@@ -40,6 +40,15 @@ fn main() -> anyhow::Result<()> {
             client.send_result()?;
             Ok(())
         }
+        "no-token" => {
+            // Connects as if it were some other process: no session token.
+            let dir = fbksd_core::rendezvous::from_env().context("no rendezvous")?;
+            let mut stream = UnixStream::connect(fbksd_core::rendezvous::control_socket(&dir))?;
+            write_frame(&mut stream, &Hello { session: None, ..Hello::new(Role::Technique) })?;
+            let answer: Option<ToTechnique> = read_frame(&mut stream)?;
+            eprintln!("manager answered: {answer:?}");
+            Ok(())
+        }
         "wrong-size" => raw_session(FromTechnique::SendResult { width: 1, height: 1, channels: 3 }),
         "duplicate-layout" => raw_session(FromTechnique::SetLayout {
             layout: SampleLayout::new().with("COLOR_R").with("COLOR_G").with("COLOR_R"),
