@@ -21,6 +21,12 @@ if ! command -v cargo >/dev/null; then
     echo "setup: cargo (Rust) is required: install it with rustup, then run this again" >&2
     exit 1
 fi
+# Independent implementations the metric tests compare against.
+PIP_PACKAGES=(numpy scikit-image flip-evaluator)
+if ! python3 -c "import numpy, skimage, flip_evaluator" >/dev/null 2>&1; then
+    python3 -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}"
+fi
+
 if ! cargo nextest --version >/dev/null 2>&1; then
     cargo install cargo-nextest --locked
 fi

@@ -2,6 +2,8 @@
 //! printing live here; the work is in `fbksd-manager`.
 
 mod bench;
+mod iqa;
+mod results;
 mod run;
 
 use clap::{Parser, Subcommand};
@@ -18,6 +20,12 @@ struct Cli {
 enum Command {
     /// Run techniques on scenes at several sample budgets and write the results.
     Run(run::RunArgs),
+    /// Compute or show the metric values of a results directory.
+    #[command(subcommand)]
+    Results(results::ResultsCommand),
+    /// Image quality metrics: list, compute one, benchmark.
+    #[command(subcommand)]
+    Iqa(iqa::IqaCommand),
     /// Measure the SDK itself.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -26,6 +34,8 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Run(args) => run::run(args),
+        Command::Results(command) => results::results(command),
+        Command::Iqa(command) => iqa::iqa(command),
         Command::Bench(command) => bench::bench(command),
     }
 }

@@ -8,6 +8,8 @@
 //! | `PSNR` | 10 log₁₀(255² / MSE₈), at most 100 dB | tone-mapped 8-bit range | no | — |
 //! | `SSIM` | Wang et al. 2004, 11×11 Gaussian σ = 1.5, C1 = 6.5025, C2 = 58.5225 ([`ssim`]) | tone-mapped 8-bit range | no | 1 − S, linear 0 to 1 |
 //! | `SMAPE` | mean of \|t − r\| / (\|t\| + \|r\| + ε), ε = 0.01 | linear HDR values | yes | per pixel, linear 0 to 1 |
+//! | `FLIP` | LDR-ꟻLIP, Andersson et al. 2020 ([`flip`]) | linear values clamped to [0, 1] | yes | ꟻLIP per pixel, linear 0 to 1 |
+//! | `HDR-FLIP` | HDR-ꟻLIP, Andersson et al. 2021: ACES, automatic exposures | linear HDR values | yes | ꟻLIP per pixel, linear 0 to 1 |
 //!
 //! Every mean runs over the three channels of every pixel. **Tone map**
 //! (PSNR, SSIM): each channel clamped to [0, 1], the sRGB transfer curve,
@@ -33,6 +35,7 @@
 
 pub mod colormap;
 pub mod external;
+pub mod flip;
 pub mod image;
 mod pixelwise;
 pub mod ssim;
@@ -40,6 +43,7 @@ pub mod ssim;
 pub use pixelwise::{tone_map, EPSILON};
 
 use image::Image;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -56,6 +60,10 @@ pub enum Metric {
     Ssim,
     /// Symmetric mean absolute percentage error.
     Smape,
+    /// LDR-ꟻLIP.
+    Flip,
+    /// HDR-ꟻLIP.
+    HdrFlip,
 }
 
 /// What a metric is, in the original FBKSD's IQA `info.json` terms.
@@ -75,7 +83,8 @@ pub struct MetricInfo {
 
 impl Metric {
     /// Every built-in metric.
-    pub const ALL: [Metric; 5] = [Metric::Mse, Metric::RelMse, Metric::Psnr, Metric::Ssim, Metric::Smape];
+    pub const ALL: [Metric; 7] =
+        [Metric::Mse, Metric::RelMse, Metric::Psnr, Metric::Ssim, Metric::Smape, Metric::Flip, Metric::HdrFlip];
 
     /// The metric's acronym.
     pub fn acronym(self) -> &'static str {
@@ -85,6 +94,8 @@ impl Metric {
             Metric::Psnr => "PSNR",
             Metric::Ssim => "SSIM",
             Metric::Smape => "SMAPE",
+            Metric::Flip => "FLIP",
+            Metric::HdrFlip => "HDR-FLIP",
         }
     }
 
@@ -101,6 +112,8 @@ impl Metric {
             Metric::Psnr => ("Peak signal-to-noise ratio", ""),
             Metric::Ssim => ("Structural similarity", "Wang, Bovik, Sheikh and Simoncelli 2004, Image quality assessment: from error visibility to structural similarity"),
             Metric::Smape => ("Symmetric mean absolute percentage error", ""),
+            Metric::Flip => ("FLIP (LDR)", "Andersson, Nilsson, Akenine-Möller, Oskarsson, Åström and Fairchild 2020, FLIP: A Difference Evaluator for Alternating Images"),
+            Metric::HdrFlip => ("FLIP (HDR)", "Andersson, Nilsson, Shirley and Akenine-Möller 2021, Visualizing Errors in Rendered High Dynamic Range Images"),
         };
         MetricInfo {
             acronym: self.acronym().into(),
@@ -238,6 +251,23 @@ pub fn evaluate(metric: Metric, reference: &Image, test: &Image) -> Result<Evalu
     if reference.pixels() == 0 {
         return Err(IqaError::Empty);
     }
+    if matches!(metric, Metric::Flip | Metric::HdrFlip) {
+        let (nonfinite_reference, nonfinite_test) = pixelwise::count_nonfinite(reference, test);
+        // ꟻLIP filters the whole image: non-finite values read as 0 (and are counted).
+        let clean = |img: &Image| img.rgb.iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect::<Vec<f32>>();
+        let (r, t) = (clean(reference), clean(test));
+        let (w, h) = (reference.width as usize, reference.height as usize);
+        let ppd = flip::default_ppd();
+        let values = if metric == Metric::Flip {
+            flip::flip_ldr_map(&r, &t, w, h, ppd)
+        } else {
+            flip::flip_hdr_map(&r, &t, w, h, ppd)
+        };
+        let rows: Vec<f64> = values.par_chunks(w).map(|row| row.iter().map(|v| *v as f64).sum()).collect();
+        let value = rows.iter().sum::<f64>() / (w * h) as f64;
+        let map = ErrorMap { width: reference.width, height: reference.height, values, scale: metric.map_scale() };
+        return Ok(Evaluation { value, map: Some(map), nonfinite_reference, nonfinite_test });
+    }
     if metric == Metric::Ssim {
         let (nonfinite_reference, nonfinite_test) = pixelwise::count_nonfinite(reference, test);
         let (value, map) = ssim::ssim(reference, test);
@@ -248,7 +278,7 @@ pub fn evaluate(metric: Metric, reference: &Image, test: &Image) -> Result<Evalu
         Metric::Mse => pixelwise::squared,
         Metric::RelMse => pixelwise::relative_squared,
         Metric::Smape => pixelwise::symmetric_absolute,
-        Metric::Psnr | Metric::Ssim => pixelwise::tone_mapped_squared,
+        Metric::Psnr | Metric::Ssim | Metric::Flip | Metric::HdrFlip => pixelwise::tone_mapped_squared,
     };
     let mean = pixelwise::pixel_mean(reference, test, error);
     if mean.counted == 0 {

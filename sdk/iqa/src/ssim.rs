@@ -105,14 +105,20 @@ impl RowStats {
     ) {
         let w = reference.width as usize;
         let (r, t) = (&reference.rgb[y * w * 3..(y + 1) * w * 3], &test.rgb[y * w * 3..(y + 1) * w * 3]);
+        // Gather the channel into contiguous rows first: the tone map then
+        // runs over plain slices, which vectorises.
+        let [a, b, aa, bb, ab] = scratch;
+        for (x, (va, vb)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
+            *va = r[x * 3 + c];
+            *vb = t[x * 3 + c];
+        }
+        for v in a.iter_mut().chain(b.iter_mut()) {
+            *v = tone_map_f32(*v) - SHIFT;
+        }
         for x in 0..w {
-            let a = tone_map_f32(r[x * 3 + c]) - SHIFT;
-            let b = tone_map_f32(t[x * 3 + c]) - SHIFT;
-            scratch[0][x] = a;
-            scratch[1][x] = b;
-            scratch[2][x] = a * a;
-            scratch[3][x] = b * b;
-            scratch[4][x] = a * b;
+            aa[x] = a[x] * a[x];
+            bb[x] = b[x] * b[x];
+            ab[x] = a[x] * b[x];
         }
         for (plane, raw) in self.planes.iter_mut().zip(scratch.iter()) {
             blur_row(raw, plane, k);

@@ -1,5 +1,6 @@
-//! Our metrics against independent implementations: scikit-image (SSIM,
-//! PSNR, MSE) run by python3 on the same pixels. `deploy/setup.sh` installs
+//! Our metrics against independent implementations run by python3 on the
+//! same pixels: scikit-image (SSIM, PSNR, MSE) and NVIDIA's flip-evaluator
+//! (LDR- and HDR-ꟻLIP). `deploy/setup.sh` installs
 //! them (`pip install numpy scikit-image flip-evaluator`).
 
 use fbksd_iqa::image::Image;
@@ -86,4 +87,26 @@ fn psnr_and_mse_equal_scikit_image() {
     assert!((ours - psnr).abs() < 1e-6, "ours {ours}, scikit-image {psnr}");
     let mse = python(&r, &t, "from skimage.metrics import mean_squared_error as m\nprint(m(ref.astype(np.float64), test.astype(np.float64)))");
     assert!((evaluate(Metric::Mse, &r, &t).unwrap().value - mse).abs() < 1e-12);
+}
+
+#[test]
+fn flip_equals_nvidias_flip_evaluator() {
+    for (w, h, seed) in [(64, 48, 5), (23, 17, 6)] {
+        let (r, t) = pair(w, h, seed);
+        let ldr = evaluate(Metric::Flip, &r, &t).unwrap();
+        let theirs = python(
+            &r,
+            &t,
+            "import flip_evaluator as f\n_, m, _ = f.evaluate(ref, test, 'LDR', inputsRGB=False, applyMagma=False)\nprint(m)",
+        );
+        assert!((ldr.value - theirs).abs() < 1e-5, "LDR {w}×{h}: ours {}, flip-evaluator {theirs}", ldr.value);
+        let hdr = evaluate(Metric::HdrFlip, &r, &t).unwrap();
+        let theirs = python(
+            &r,
+            &t,
+            "import flip_evaluator as f\n_, m, _ = f.evaluate(ref, test, 'HDR', applyMagma=False)\nprint(m)",
+        );
+        assert!((hdr.value - theirs).abs() < 1e-5, "HDR {w}×{h}: ours {}, flip-evaluator {theirs}", hdr.value);
+        assert!(hdr.value > 0.0 && ldr.value > 0.0);
+    }
 }

@@ -11,6 +11,7 @@
 //! - [`benchmark::Benchmark`]: techniques × scenes × budgets into a results
 //!   directory ([`results`]).
 //! - [`process`]: supervised child processes (CPU time and peak memory by `wait4`).
+//! - [`evaluation`]: metric values and error maps of a results directory, and ranking.
 //!
 //! ```no_run
 //! use fbksd_manager::{Benchmark, TechniqueSpec, SceneSpec, Limits};
@@ -29,6 +30,7 @@
 #![deny(missing_docs)]
 
 pub mod benchmark;
+pub mod evaluation;
 pub mod process;
 pub mod record;
 pub mod results;

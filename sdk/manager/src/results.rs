@@ -47,6 +47,9 @@ pub struct IndexEntry {
     pub render_ms: f64,
     /// Samples used.
     pub used_samples: u64,
+    /// Metric values by acronym (filled by `fbksd results compute`).
+    #[serde(default)]
+    pub metrics: std::collections::BTreeMap<String, f64>,
 }
 
 /// The index file.
@@ -123,10 +126,26 @@ impl ResultsDir {
             technique_ms: record.times.technique_ms,
             render_ms: record.times.render_ms,
             used_samples: record.used_samples,
+            metrics: Default::default(),
         };
         let mut index = self.read_index()?;
+        // A run replaced by a new one loses its old metric values and files.
+        if let Some(old) =
+            index.runs.iter().find(|r| (&r.technique, &r.scene, r.spp) == (&entry.technique, &entry.scene, entry.spp))
+        {
+            let dir = self.root.join(&old.technique).join(&old.scene);
+            for metric in old.metrics.keys() {
+                let _ = std::fs::remove_file(dir.join(format!("{}_0_{metric}.json", old.spp)));
+                let _ = std::fs::remove_file(dir.join(format!("{}_0_{metric}_map.png", old.spp)));
+            }
+        }
         index.runs.retain(|r| (&r.technique, &r.scene, r.spp) != (&entry.technique, &entry.scene, entry.spp));
         index.runs.push(entry);
+        self.write_index(index)
+    }
+
+    /// Writes the index (sorted by technique, scene and spp).
+    pub fn write_index(&self, mut index: ResultsIndex) -> io::Result<()> {
         index.runs.sort_by(|a, b| (&a.technique, &a.scene, a.spp).cmp(&(&b.technique, &b.scene, b.spp)));
         write_json_atomically(&self.root.join(INDEX_FILE), &index)
     }
