@@ -172,11 +172,15 @@ pub struct Standing {
     pub missing: usize,
 }
 
+/// Values of one (scene, spp, metric) group, by technique.
+type Group<'a> = Vec<(&'a str, f64)>;
+
 /// Ranks techniques by mean rank over (scene, spp, metric) groups.
 pub fn rank(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -> Vec<Standing> {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
     let n = techniques.len();
-    let mut groups: BTreeMap<(&str, u64, &str), Vec<(&str, f64)>> = BTreeMap::new();
+    // (scene, spp, metric) → (technique, value).
+    let mut groups: BTreeMap<(&str, u64, &str), Group> = BTreeMap::new();
     for r in runs {
         for (metric, value) in &r.metrics {
             groups.entry((&r.scene, r.spp, metric)).or_default().push((&r.technique, *value));
