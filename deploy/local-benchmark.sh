@@ -1,13 +1,19 @@
 #!/usr/bin/env bash
-# Builds FBKSD and runs a local benchmark: the Rust box filter on the
-# experimental scenes (procedural renderer) at 1, 4 and 16 spp.
-# Results go to ./fbksd-results.
+# Builds FBKSD and runs a local benchmark end to end: references of the
+# experimental scenes (built once, then cached beside each scene), the Rust
+# box filter on every scene at 1, 4 and 16 spp, metric values and error
+# maps, and the ranking. Results go to ./fbksd-results.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --locked --workspace --bins
 bin=target/release
+"$bin/fbksd-procedural" reference scenes/experimental/*
 scenes=()
 for dir in scenes/experimental/*/; do
     scenes+=(--scene "$dir")
 done
-"$bin/fbksd" run --technique "$bin/box-filter" "${scenes[@]}" --spp 1,4,16 --results fbksd-results
+status=0
+"$bin/fbksd" run --technique "$bin/box-filter" "${scenes[@]}" --spp 1,4,16 --results fbksd-results || status=$?
+"$bin/fbksd" results compute --results fbksd-results --scenes scenes
+"$bin/fbksd" results show --results fbksd-results
+exit "$status"
