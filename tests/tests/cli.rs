@@ -127,3 +127,32 @@ fn a_scene_directory_brings_its_renderer_and_budgets() {
     let (w, h, _) = fbksd_manager::results::read_exr(&results.join("box-filter/sphere/1_0.exr")).unwrap();
     assert_eq!((w, h), (500, 500));
 }
+
+#[test]
+fn two_fbksd_run_processes_at_once_on_one_host() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = analytic_scene(dir.path(), "both", 30, 20);
+    let runs: Vec<_> = (0..2)
+        .map(|i| {
+            Command::new(bin("fbksd"))
+                .args([
+                    "run",
+                    "-t",
+                    &bin("box-filter"),
+                    "-r",
+                    &bin("fbksd-analytic-renderer"),
+                    "-s",
+                    scene.to_str().unwrap(),
+                ])
+                .args(["--spp", "1,16", "--results", dir.path().join(format!("r{i}")).to_str().unwrap()])
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    for (i, run) in runs.into_iter().enumerate() {
+        let out = run.wait_with_output().unwrap();
+        assert!(out.status.success(), "run {i}: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(dir.path().join(format!("r{i}/box-filter/both/16_0.exr")).is_file());
+    }
+}

@@ -62,7 +62,9 @@ fn python(reference: &Image, test: &Image, script: &str) -> f64 {
 
 #[test]
 fn ssim_equals_scikit_image() {
-    for (w, h, seed) in [(64, 48, 1), (11, 11, 2), (131, 97, 3)] {
+    // An 11 × 11 image has a single full window: f32 filtering error is not
+    // averaged away there, so it gets 1e−5; ordinary images agree to 2e−6.
+    for (w, h, seed, tolerance) in [(64, 48, 1, 2e-6), (11, 11, 2, 1e-5), (131, 97, 3, 2e-6)] {
         let (r, t) = pair(w, h, seed);
         let ours = evaluate(Metric::Ssim, &r, &t).unwrap().value;
         let theirs = python(
@@ -71,7 +73,7 @@ fn ssim_equals_scikit_image() {
             "from skimage.metrics import structural_similarity as s\n\
              print(s(tone_map(ref), tone_map(test), data_range=255, gaussian_weights=True, sigma=1.5, use_sample_covariance=False, channel_axis=2))",
         );
-        assert!((ours - theirs).abs() < 2e-6, "{w}×{h}: ours {ours}, scikit-image {theirs}");
+        assert!((ours - theirs).abs() < tolerance, "{w}×{h}: ours {ours}, scikit-image {theirs}");
     }
 }
 
