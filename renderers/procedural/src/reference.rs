@@ -33,6 +33,14 @@ pub struct ReferenceNote {
     pub mean_value: f64,
     /// Seconds it took.
     pub seconds: f64,
+    /// What made it: `fbksd-procedural <version>, sampler <n>`. A reference
+    /// made by another sampler is rebuilt.
+    #[serde(default)]
+    pub generator: String,
+}
+
+fn generator() -> String {
+    format!("fbksd-procedural {}, sampler {}", env!("CARGO_PKG_VERSION"), crate::render::SAMPLER_VERSION)
 }
 
 impl std::fmt::Display for ReferenceNote {
@@ -57,7 +65,10 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
     let out = meta.reference_file();
     let note_file = out.with_extension("json");
     if !force && out.is_file() && note_file.is_file() {
-        return Ok(serde_json::from_slice(&std::fs::read(&note_file)?)?);
+        let note: ReferenceNote = serde_json::from_slice(&std::fs::read(&note_file)?)?;
+        if note.generator == generator() {
+            return Ok(note);
+        }
     }
     let scene = Scene::load(&meta.scene_file()).map_err(anyhow::Error::msg)?;
     if (scene.width, scene.height) != (meta.width, meta.height) {
@@ -98,6 +109,7 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         estimated_error,
         mean_value,
         seconds: started.elapsed().as_secs_f64(),
+        generator: generator(),
     };
     std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
     Ok(note)

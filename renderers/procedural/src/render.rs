@@ -26,22 +26,42 @@ fn mix(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+const TWO_TO_MINUS_32: f64 = 1.0 / 4_294_967_296.0;
+
 fn uniform(h: u64) -> f64 {
     // Through i64: a signed conversion is one instruction, an unsigned one several.
     (h >> 11) as i64 as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
-/// `(n / d, n % d)` by a float reciprocal with an exact correction: integer
-/// division costs tens of cycles, several times per sample.
-#[inline]
-fn div_mod(n: u64, d: u64, inv_d: f64) -> (u64, u64) {
-    let mut q = (n as i64 as f64 * inv_d) as i64 as u64;
-    if q * d > n {
-        q -= 1;
-    } else if (q + 1) * d <= n {
-        q += 1;
+/// Exact division of integers below 2³² by a fixed divisor, as a multiply
+/// by a precomputed 64-bit reciprocal `⌈2⁶⁴ / d⌉` (for 32-bit operands the
+/// high half of the product is the exact quotient). Wider operands fall back
+/// to hardware division.
+#[derive(Debug, Clone, Copy)]
+struct Divisor {
+    d: u64,
+    reciprocal: u64,
+}
+
+impl Divisor {
+    fn new(d: u64) -> Self {
+        let d = d.max(1);
+        Divisor { d, reciprocal: if d == 1 { 0 } else { u64::MAX / d + 1 } }
     }
-    (q, n - q * d)
+
+    /// `(n / d, n % d)`.
+    #[inline(always)]
+    fn div_mod(&self, n: u64) -> (u64, u64) {
+        if self.d == 1 {
+            return (n, 0);
+        }
+        if n >> 32 == 0 {
+            let q = ((self.reciprocal as u128 * n as u128) >> 64) as u64;
+            return (q, n - q * self.d);
+        }
+        // Only above 2²⁶ spp: exact, if slow.
+        (n / self.d, n % self.d)
+    }
 }
 
 /// Small primes for the per-dimension permutations `s ↦ (a·s + b) mod n`.
@@ -66,10 +86,12 @@ pub struct Sampler {
 pub struct Strata {
     spp: u64,
     inv_spp: f64,
+    by_spp: Divisor,
     k: u64,
     inv_k: f64,
+    by_k: Divisor,
+    by_cells: Divisor,
     cells: u64,
-    inv_cells: f64,
     /// Multipliers of the affine permutations: of `0..spp` (time), of the
     /// k² cells (pairs), of `0..k` (sub-positions in a cell).
     a_time: u64,
@@ -85,10 +107,12 @@ impl Strata {
         Strata {
             spp,
             inv_spp: 1.0 / spp as f64,
+            by_spp: Divisor::new(spp),
             k,
             inv_k: 1.0 / k as f64,
+            by_k: Divisor::new(k),
+            by_cells: Divisor::new(k * k),
             cells: k * k,
-            inv_cells: 1.0 / (k * k) as f64,
             a_time: coprime(spp, 3),
             a_cell: coprime(k * k, 1),
             a_sub: coprime(k, 2),
@@ -105,6 +129,8 @@ pub struct PixelSeed {
     /// Random offsets of the time permutation and of the three pairs' cell permutations.
     time_offset: u64,
     cell_offsets: [u64; 3],
+    /// Per pair and axis, the random offset of the sub-position shuffles.
+    line_offsets: [[u64; 2]; 3],
 }
 
 impl Sampler {
@@ -125,6 +151,10 @@ impl Sampler {
             seed,
             time_offset: offset(3, strata.spp),
             cell_offsets: [offset(4, strata.cells), offset(5, strata.cells), offset(6, strata.cells)],
+            // Reduced mod k: the shuffles' operands then stay below 2³² (fast division).
+            line_offsets: std::array::from_fn(|p| {
+                std::array::from_fn(|axis| mix(seed ^ ((p as u64 * 2 + axis as u64 + 7) << 40)) % strata.k)
+            }),
         }
     }
 
@@ -141,36 +171,44 @@ impl Sampler {
     #[inline(always)]
     pub fn pixel_sample(&self, pixel: &PixelSeed, strata: &Strata, s: u64, needed: u8) -> [f64; 7] {
         let u = |d: u64| uniform(mix(pixel.seed ^ (s << 4 | d)));
-        let (k, inv_k) = (strata.k, strata.inv_k);
+        let inv_k = strata.inv_k;
         let below_one = |v: f64| v.min(1.0 - f64::EPSILON);
-        let pair = |which: usize, dx: u64, dy: u64| {
-            let cell = div_mod(strata.a_cell * s + pixel.cell_offsets[which], strata.cells, strata.inv_cells).1;
-            let (row, column) = div_mod(cell, k, inv_k);
-            let shuffle = |axis: u64, line: u64, position: u64| {
-                let offset = mix(pixel.seed ^ ((which as u64 * 2 + axis) << 40) ^ line);
-                div_mod(strata.a_sub * position + (offset >> 16), k, inv_k).1
+        let pair = |which: usize, d: u64| {
+            let cell = strata.by_cells.div_mod(strata.a_cell * s + pixel.cell_offsets[which]).1;
+            let (row, column) = strata.by_k.div_mod(cell);
+            // Sub-column of the sample in its cell: a permutation of the rows
+            // of its column, shifted by a random per-pixel, per-column offset
+            // (an odd stride per line), so it is uniform over pixels; likewise
+            // the sub-row.
+            let shuffle = |axis: usize, line: u64, position: u64| {
+                let offset = pixel.line_offsets[which][axis] + line * 0x9E37;
+                strata.by_k.div_mod(strata.a_sub * position + offset).1
             };
             let sub_x = shuffle(0, column, row) as i64 as f64;
             let sub_y = shuffle(1, row, column) as i64 as f64;
+            // One hash gives both jitters (32 bits each).
+            let h = mix(pixel.seed ^ (s << 4 | d));
+            let (ux, uy) =
+                ((h >> 32) as i64 as f64 * TWO_TO_MINUS_32, (h & 0xFFFF_FFFF) as i64 as f64 * TWO_TO_MINUS_32);
             let (c, r) = (column as i64 as f64, row as i64 as f64);
-            (below_one((c + (sub_x + u(dx)) * inv_k) * inv_k), below_one((r + (sub_y + u(dy)) * inv_k) * inv_k))
+            (below_one((c + (sub_x + ux) * inv_k) * inv_k), below_one((r + (sub_y + uy) * inv_k) * inv_k))
         };
         let mut p = [0.0; 7];
         let has = |d: usize| needed & (1 << d) != 0;
         if has(0) || has(1) {
-            let (x, y) = pair(0, 0, 1);
+            let (x, y) = pair(0, 0);
             p[0] = pixel.x as f64 + x;
             p[1] = pixel.y as f64 + y;
         }
         if has(2) || has(3) {
-            (p[2], p[3]) = pair(1, 2, 3);
+            (p[2], p[3]) = pair(1, 2);
         }
         if has(4) {
-            let stratum = div_mod(strata.a_time * s + pixel.time_offset, strata.spp, strata.inv_spp).1;
+            let stratum = strata.by_spp.div_mod(strata.a_time * s + pixel.time_offset).1;
             p[4] = below_one((stratum as i64 as f64 + u(4)) * strata.inv_spp);
         }
         if has(5) || has(6) {
-            (p[5], p[6]) = pair(2, 5, 6);
+            (p[5], p[6]) = pair(2, 5);
         }
         p
     }
@@ -424,4 +462,26 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
         },
     )?;
     Ok(image)
+}
+
+/// Bumped whenever sample positions change, so cached references are rebuilt.
+pub const SAMPLER_VERSION: u32 = 2;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_division_is_exact_including_wide_operands() {
+        for d in [1u64, 2, 3, 7, 8, 63, 64, 65, 1000, 65536, 4_000_000_007] {
+            let by = Divisor::new(d);
+            let mut n = 0x9E37_79B9u64;
+            for _ in 0..2000 {
+                n = mix(n);
+                for v in [n & 0xFFFF, n & 0xFFFF_FFFF, n >> 8, d - 1, d, d + 1, u32::MAX as u64] {
+                    assert_eq!(by.div_mod(v), (v / d, v % d), "{v} / {d}");
+                }
+            }
+        }
+    }
 }
