@@ -123,14 +123,20 @@ pub fn tone_map(linear: f64) -> f64 {
 /// exponent and top 9 mantissa bits select a slot (2⁻⁹ wide, relatively),
 /// the remaining bits interpolate linearly within it. No square root and no
 /// float-to-integer conversion: a shift, two loads and a multiply-add.
-#[inline(always)]
+#[cfg(test)]
 pub fn tone_map_f32(linear: f32) -> f32 {
+    tone_map_with(linear, bits_table())
+}
+
+/// [`tone_map_f32`] with its table passed in, for loops that fetch it once.
+#[inline(always)]
+pub(crate) fn tone_map_with(linear: f32, table: &[(f32, f32)]) -> f32 {
     let v = linear.clamp(0.0, 1.0);
     let v = if v.is_nan() { 0.0 } else { v };
     let bits = v.max(BITS_TABLE_START).to_bits();
     let slot = ((bits >> LOW_BITS) - (BITS_TABLE_START.to_bits() >> LOW_BITS)) as usize;
     let frac = (bits & ((1 << LOW_BITS) - 1)) as f32 * (1.0 / (1u32 << LOW_BITS) as f32);
-    let (base, delta) = bits_table()[slot.min(BITS_TABLE_SLOTS - 1)];
+    let (base, delta) = table[slot.min(BITS_TABLE_SLOTS - 1)];
     let power = base + delta * frac;
     if v >= 1.0 {
         255.0
@@ -148,7 +154,7 @@ const BITS_TABLE_START: f32 = 1.0 / 512.0;
 /// Slots from 2⁻⁹ up to 1: 9 exponents × 512.
 const BITS_TABLE_SLOTS: usize = 9 * 512;
 
-fn bits_table() -> &'static [(f32, f32)] {
+pub(crate) fn bits_table() -> &'static [(f32, f32)] {
     static TABLE: std::sync::OnceLock<Vec<(f32, f32)>> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
         let curve = |x: f64| 255.0 * (1.055 * x.powf(1.0 / 2.4) - 0.055);

@@ -22,7 +22,7 @@
 //! window is complete, so no full-size temporary image is made.
 
 use crate::image::Image;
-use crate::pixelwise::tone_map_f32;
+use crate::pixelwise::{bits_table, tone_map_with};
 use rayon::prelude::*;
 
 /// First stabilising constant, (0.01 · 255)².
@@ -112,8 +112,9 @@ impl RowStats {
             *va = r[x * 3 + c];
             *vb = t[x * 3 + c];
         }
+        let table = bits_table();
         for v in a.iter_mut().chain(b.iter_mut()) {
-            *v = tone_map_f32(*v) - SHIFT;
+            *v = tone_map_with(*v, table) - SHIFT;
         }
         for x in 0..w {
             aa[x] = a[x] * a[x];
@@ -194,14 +195,15 @@ fn channel_rows(
             }
         }
         let out_row = &mut out[i * w..(i + 1) * w];
+        // In f32: the sums it reads are f32 already, and 8 lanes beat 4.
+        let (c1, c2, shift) = (C1 as f32, C2 as f32, SHIFT);
         for x in 0..w {
-            let (ux, uy) = (sums[0][x] as f64, sums[1][x] as f64);
-            let vx = sums[2][x] as f64 - ux * ux;
-            let vy = sums[3][x] as f64 - uy * uy;
-            let vxy = sums[4][x] as f64 - ux * uy;
-            let (ux, uy) = (ux + SHIFT as f64, uy + SHIFT as f64);
-            out_row[x] =
-                (((2.0 * ux * uy + C1) * (2.0 * vxy + C2)) / ((ux * ux + uy * uy + C1) * (vx + vy + C2))) as f32;
+            let (ux, uy) = (sums[0][x], sums[1][x]);
+            let vx = sums[2][x] - ux * ux;
+            let vy = sums[3][x] - uy * uy;
+            let vxy = sums[4][x] - ux * uy;
+            let (ux, uy) = (ux + shift, uy + shift);
+            out_row[x] = ((2.0 * ux * uy + c1) * (2.0 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
         }
     }
 }
