@@ -1,21 +1,23 @@
 //! One scene: a rendezvous directory, a renderer process, and the technique
-//! sessions run against it one after another.
+//! sessions run against it one after another. The per-session state machine
+//! is in [`session`]; this module owns processes, connections and the clock.
 //!
 //! [`SceneRunner::run`] is the manager's event loop for one run. Every
 //! input — a message from either peer, a connection, a process exit, the
 //! clock — arrives on one channel, so the state machine in [`Session`] is
 //! single-threaded and every end of a run is decided in one place.
 
+mod session;
+
 use crate::process::{log_tail, report_to, ExitInfo, Supervised};
 use crate::record::{RunStatus, Times};
-use fbksd_core::layout::CompiledLayout;
 use fbksd_core::protocol::{
-    read_frame, write_frame, Amount, ErrorKind, FromRenderer, FromTechnique, Hello, Role, ToRenderer, ToTechnique,
+    read_frame, write_frame, ErrorKind, FromRenderer, FromTechnique, Hello, Role, ToRenderer, ToTechnique,
     PROTOCOL_NAME, PROTOCOL_VERSION,
 };
 use fbksd_core::scene_info::keys;
-use fbksd_core::shm::{Ring, RingSpec};
-use fbksd_core::{rendezvous, SceneInfo, Tile};
+use fbksd_core::{rendezvous, SceneInfo};
+use session::Session;
 use std::collections::VecDeque;
 use std::io::BufReader;
 use std::os::unix::fs::PermissionsExt;
@@ -123,7 +125,7 @@ impl Inbox {
     }
 }
 
-enum Event {
+pub(crate) enum Event {
     Connected(UnixStream, Hello),
     Technique(u64, Result<Option<FromTechnique>, String>),
     Renderer(u64, Result<Option<FromRenderer>, String>),
@@ -131,7 +133,7 @@ enum Event {
     RendererExited(u64, ExitInfo),
 }
 
-struct RendererConn {
+pub(crate) struct RendererConn {
     process: Supervised,
     writer: UnixStream,
     generation: u64,
@@ -140,7 +142,7 @@ struct RendererConn {
 }
 
 impl RendererConn {
-    fn send(&mut self, message: &ToRenderer) {
+    pub(crate) fn send(&mut self, message: &ToRenderer) {
         // A failed write surfaces as the reader's end of stream or the exit event.
         let _ = write_frame(&mut self.writer, message);
     }
@@ -645,15 +647,15 @@ fn accept_loop(listener: UnixListener, tx: Sender<Event>) {
     }
 }
 
-fn refuse(stream: &mut UnixStream, why: &str) {
+pub(crate) fn refuse(stream: &mut UnixStream, why: &str) {
     refuse_kind(stream, ErrorKind::Protocol, why);
 }
 
-fn refuse_kind(stream: &mut UnixStream, kind: ErrorKind, why: &str) {
+pub(crate) fn refuse_kind(stream: &mut UnixStream, kind: ErrorKind, why: &str) {
     let _ = write_frame(stream, &ToTechnique::Error { kind, message: why.to_string() });
 }
 
-fn spawn_reader<T, F>(stream: UnixStream, tx: Sender<Event>, wrap: F)
+pub(crate) fn spawn_reader<T, F>(stream: UnixStream, tx: Sender<Event>, wrap: F)
 where
     T: serde::de::DeserializeOwned + Send + 'static,
     F: Fn(Result<Option<T>, String>) -> Event + Send + 'static,
@@ -668,488 +670,4 @@ where
             }
         }
     });
-}
-
-#[derive(Debug, Clone, Copy)]
-enum Slot {
-    Free,
-    Producing { id: u64, tile: Tile },
-    Rendering { tile: Tile },
-    Consuming,
-}
-
-struct Active {
-    /// One bit per pixel: delivered by a pixel tile in this request.
-    covered: Vec<u64>,
-    input: bool,
-    spp: u64,
-    pixel_expected: u64,
-    free_expected: u64,
-    pixel_acquired: u64,
-    free_acquired: u64,
-    delivered: u64,
-    renderer_done: bool,
-}
-
-impl Active {
-    fn expected(&self) -> u64 {
-        self.pixel_expected + self.free_expected
-    }
-}
-
-type End = Option<(RunStatus, String)>;
-
-/// The state of one technique session.
-struct Session {
-    /// The token a spawned technique must present (none in debug mode).
-    token: Option<String>,
-    dir: PathBuf,
-    id: u64,
-    generation: u64,
-    /// Whether the manager started the technique (so it can wait for its exit).
-    spawned: bool,
-    width: u32,
-    height: u32,
-    spp: u64,
-    pipe_size: u64,
-    slot_bytes_default: u64,
-    info: SceneInfo,
-    result_file: String,
-    writer: Option<UnixStream>,
-    hello_at: Option<Instant>,
-    layout: Option<CompiledLayout>,
-    layout_pending: Option<(CompiledLayout, RingSpec)>,
-    ring: Option<RingSpec>,
-    budget: u64,
-    used: u64,
-    requests: u64,
-    active: Option<Active>,
-    slots: Vec<Slot>,
-    free: VecDeque<u32>,
-    queued: VecDeque<(u64, Tile)>,
-    /// Slots in the technique's hands (producing or consuming).
-    held: usize,
-    waiting_since: Option<Instant>,
-    waiting: Duration,
-    render_started: Option<Instant>,
-    render_time: Duration,
-    result_at: Option<Instant>,
-    image: Option<Vec<f32>>,
-    renderer_broken: bool,
-    exit: Option<ExitInfo>,
-}
-
-impl Session {
-    fn connect(&mut self, mut stream: UnixStream, hello: Hello, tx: &Sender<Event>) {
-        if hello.role != Role::Technique {
-            return refuse(&mut stream, "a renderer is already connected to this run");
-        }
-        if self.writer.is_some() {
-            return refuse(&mut stream, "another technique is already connected to this run");
-        }
-        if self.token.is_some() && hello.session != self.token {
-            return refuse(
-                &mut stream,
-                "this connection is not the technique started for the current run (FBKSD_SESSION missing or wrong)",
-            );
-        }
-        let Ok(mut writer) = stream.try_clone() else {
-            return;
-        };
-        let _ = writer.set_write_timeout(Some(Duration::from_secs(30)));
-        let _ = write_frame(
-            &mut writer,
-            &ToTechnique::Welcome {
-                version: PROTOCOL_VERSION,
-                scene_info: self.info.clone(),
-                result_file: self.result_file.clone(),
-            },
-        );
-        let generation = self.generation;
-        spawn_reader(stream, tx.clone(), move |m| Event::Technique(generation, m));
-        self.writer = Some(writer);
-        self.hello_at = Some(Instant::now());
-    }
-
-    fn send(&mut self, message: &ToTechnique) {
-        if let Some(w) = self.writer.as_mut() {
-            // A failed write surfaces as the reader's end of stream or the exit event.
-            let _ = write_frame(w, message);
-        }
-    }
-
-    /// Ends the session with an error the technique is told about too.
-    fn refuse(&mut self, status: RunStatus, kind: ErrorKind, message: String) -> End {
-        self.send(&ToTechnique::Error { kind, message: message.clone() });
-        Some((status, message))
-    }
-
-    fn protocol_error(&mut self, message: String) -> End {
-        self.refuse(RunStatus::ProtocolError, ErrorKind::Protocol, message)
-    }
-
-    fn renderer_failed(&mut self, message: String) -> End {
-        self.renderer_broken = true;
-        self.refuse(RunStatus::RendererFailed, ErrorKind::RendererFailed, message)
-    }
-
-    fn timeout_verdict(&self, limit: Duration) -> (RunStatus, String) {
-        let limit = humantime::format_duration(limit);
-        if self.writer.is_none() {
-            return (RunStatus::Timeout, format!("the technique did not connect within the time limit of {limit}"));
-        }
-        if self.layout_pending.is_some() {
-            return (
-                RunStatus::RendererFailed,
-                format!("the time limit of {limit} expired while the renderer was still accepting the layout"),
-            );
-        }
-        match &self.active {
-            Some(a) if self.held == 0 => (
-                RunStatus::RendererFailed,
-                format!(
-                    "the time limit of {limit} expired while the technique waited for the renderer ({} of {} samples delivered)",
-                    a.delivered,
-                    a.expected()
-                ),
-            ),
-            _ => (RunStatus::Timeout, format!("the technique exceeded the time limit of {limit}")),
-        }
-    }
-
-    fn hand_to_technique(&mut self, message: ToTechnique) {
-        if self.held == 0 {
-            if let Some(since) = self.waiting_since.take() {
-                self.waiting += since.elapsed();
-            }
-        }
-        self.held += 1;
-        self.send(&message);
-    }
-
-    fn take_back_from_technique(&mut self) {
-        self.held -= 1;
-        if self.held == 0 && self.active.is_some() {
-            self.waiting_since = Some(Instant::now());
-        }
-    }
-
-    fn slot_state(&self, slot: u32) -> Option<Slot> {
-        self.slots.get(slot as usize).copied()
-    }
-
-    fn on_technique(&mut self, message: FromTechnique, renderer: &mut RendererConn, result: &std::fs::File) -> End {
-        match message {
-            FromTechnique::SetLayout { layout } => {
-                if self.layout.is_some() || self.layout_pending.is_some() {
-                    return self.protocol_error("set_layout may be called only once per run".into());
-                }
-                let compiled = match layout.compile() {
-                    Ok(c) => c,
-                    Err(e) => return self.refuse(RunStatus::InvalidLayout, ErrorKind::InvalidLayout, e.to_string()),
-                };
-                let sample_bytes = compiled.sample_size() as u64 * 4;
-                let slot_count = std::thread::available_parallelism().map_or(2, |n| n.get()).clamp(2, 7) as u32 * 2 + 2;
-                // A slot holds at least one pixel at the full budget, so any SPP
-                // tile fits; it need not hold more than the whole budget spread
-                // over the ring (small images get small rings).
-                let whole_budget = (self.budget * sample_bytes).div_ceil(slot_count as u64);
-                let slot_bytes = self
-                    .slot_bytes_default
-                    .min(whole_budget)
-                    .max(self.spp.max(1) * sample_bytes)
-                    .next_multiple_of(4096);
-                let spec = RingSpec { session: self.id, slot_count, slot_bytes };
-                if let Err(e) = Ring::create_file(&self.dir, spec) {
-                    return self.renderer_failed(format!("cannot create the sample ring: {e}"));
-                }
-                self.pipe_size = spec.slot_samples(compiled.sample_size());
-                self.slots = vec![Slot::Free; slot_count as usize];
-                self.free = (0..slot_count).collect();
-                renderer.send(&ToRenderer::SetLayout { layout: compiled.source().clone(), ring: spec });
-                self.ring = Some(spec);
-                self.layout_pending = Some((compiled, spec));
-                // The technique now waits for the renderer: not its time.
-                self.waiting_since = Some(Instant::now());
-                None
-            }
-            FromTechnique::Evaluate { amount, input } => self.start_request(amount, input, renderer),
-            FromTechnique::Produced { slot } => {
-                let Some(Slot::Producing { id, tile }) = self.slot_state(slot) else {
-                    return self
-                        .protocol_error(format!("produced slot {slot}, which the technique was not asked to fill"));
-                };
-                self.slots[slot as usize] = Slot::Rendering { tile };
-                self.take_back_from_technique();
-                renderer.send(&ToRenderer::Granted { id, slot });
-                None
-            }
-            FromTechnique::Consumed { slot } => {
-                let Some(Slot::Consuming) = self.slot_state(slot) else {
-                    return self.protocol_error(format!("consumed slot {slot}, which the technique did not hold"));
-                };
-                self.slots[slot as usize] = Slot::Free;
-                self.free.push_back(slot);
-                self.take_back_from_technique();
-                if let Some((id, tile)) = self.queued.pop_front() {
-                    self.grant(id, tile, renderer);
-                }
-                self.check_complete()
-            }
-            FromTechnique::SendResult { width, height, channels } => {
-                if self.active.is_some() {
-                    return self.protocol_error("send_result during a sample request".into());
-                }
-                if (width, height, channels) != (self.width, self.height, 3) {
-                    return self.refuse(
-                        RunStatus::InvalidOutput,
-                        ErrorKind::InvalidOutput,
-                        format!(
-                            "the result is {width}×{height}×{channels} but the scene is {}×{}×3",
-                            self.width, self.height
-                        ),
-                    );
-                }
-                self.result_at = Some(Instant::now());
-                let mut bytes = vec![0u8; self.width as usize * self.height as usize * 12];
-                if let Err(e) = std::os::unix::fs::FileExt::read_exact_at(result, &mut bytes, 0) {
-                    return self.refuse(
-                        RunStatus::InvalidOutput,
-                        ErrorKind::InvalidOutput,
-                        format!("the result buffer could not be read (was it truncated?): {e}"),
-                    );
-                }
-                let pixels: Vec<f32> =
-                    bytes.chunks_exact(4).map(|b| f32::from_ne_bytes([b[0], b[1], b[2], b[3]])).collect();
-                let bad = pixels.iter().filter(|v| !v.is_finite()).count();
-                let first_bad = pixels.iter().position(|v| !v.is_finite());
-                self.image = Some(pixels);
-                self.send(&ToTechnique::ResultAccepted);
-                if let Some(i) = first_bad {
-                    let px = i / 3;
-                    return Some((
-                        RunStatus::InvalidOutput,
-                        format!(
-                            "the result has {bad} NaN or infinite values (first at pixel x={}, y={}); the image is kept for inspection",
-                            px % self.width as usize,
-                            px / self.width as usize
-                        ),
-                    ));
-                }
-                Some((RunStatus::Ok, String::new()))
-            }
-        }
-    }
-
-    fn start_request(&mut self, amount: Amount, input: bool, renderer: &mut RendererConn) -> End {
-        let Some(layout) = &self.layout else {
-            return self.protocol_error("evaluate before set_layout".into());
-        };
-        if self.active.is_some() {
-            return self.protocol_error("evaluate while another request is in progress".into());
-        }
-        let layout_has_input = layout.has_input();
-        if input && !layout_has_input {
-            return self.refuse(
-                RunStatus::ProtocolError,
-                ErrorKind::BadRequest,
-                "evaluate_input_samples needs INPUT random parameters in the layout".into(),
-            );
-        }
-        if !input && layout_has_input {
-            return self.refuse(
-                RunStatus::ProtocolError,
-                ErrorKind::BadRequest,
-                "the layout has INPUT random parameters: request samples with evaluate_input_samples".into(),
-            );
-        }
-        let pixels = self.width as u64 * self.height as u64;
-        let (samples, what) = match amount {
-            Amount::Spp(n) => (n.checked_mul(pixels), format!("{n} spp × {pixels} pixels")),
-            Amount::Samples(n) => (Some(n), format!("{n} samples")),
-        };
-        let remaining = self.budget - self.used;
-        let samples = match samples {
-            Some(0) => {
-                return self.refuse(RunStatus::ProtocolError, ErrorKind::BadRequest, "a request for 0 samples".into())
-            }
-            Some(s) if s <= remaining => s,
-            _ => {
-                return self.refuse(
-                    RunStatus::OverBudget,
-                    ErrorKind::OverBudget,
-                    format!(
-                        "requested {what} but only {remaining} of the budget of {} samples ({} spp) remain",
-                        self.budget, self.spp
-                    ),
-                )
-            }
-        };
-        // Count requests without INPUT come as whole spp plus a remainder, so
-        // the renderer can stratify; with INPUT the technique places every sample.
-        let (spp, free) = match amount {
-            Amount::Spp(n) => (n, 0),
-            Amount::Samples(n) if input => (0, n),
-            Amount::Samples(n) => (n / pixels, n % pixels),
-        };
-        self.requests += 1;
-        self.active = Some(Active {
-            covered: if spp > 0 { vec![0; (pixels as usize).div_ceil(64)] } else { Vec::new() },
-            input,
-            spp,
-            pixel_expected: spp * pixels,
-            free_expected: free,
-            pixel_acquired: 0,
-            free_acquired: 0,
-            delivered: 0,
-            renderer_done: false,
-        });
-        debug_assert_eq!(spp * pixels + free, samples);
-        self.waiting_since = Some(Instant::now());
-        self.render_started = Some(Instant::now());
-        renderer.send(&ToRenderer::Evaluate {
-            spp,
-            remaining: free,
-            pipe_size: self.pipe_size,
-            input,
-            request: self.requests - 1,
-        });
-        None
-    }
-
-    fn grant(&mut self, id: u64, tile: Tile, renderer: &mut RendererConn) {
-        let slot = self.free.pop_front().expect("grant with a free slot");
-        if self.active.as_ref().is_some_and(|a| a.input) {
-            self.slots[slot as usize] = Slot::Producing { id, tile };
-            self.hand_to_technique(ToTechnique::Produce { slot, tile });
-        } else {
-            self.slots[slot as usize] = Slot::Rendering { tile };
-            renderer.send(&ToRenderer::Granted { id, slot });
-        }
-    }
-
-    fn on_renderer(&mut self, message: FromRenderer, renderer: &mut RendererConn) -> End {
-        match message {
-            FromRenderer::LayoutAccepted => {
-                let Some((compiled, ring)) = self.layout_pending.take() else {
-                    return self.renderer_failed("the renderer accepted a layout nobody set".into());
-                };
-                self.send(&ToTechnique::LayoutSet { ring, sample_size: compiled.sample_size() as u32 });
-                self.layout = Some(compiled);
-                if let Some(since) = self.waiting_since.take() {
-                    self.waiting += since.elapsed();
-                }
-                None
-            }
-            FromRenderer::Failed { message } if self.layout_pending.is_some() => {
-                self.layout_pending = None;
-                self.refuse(
-                    RunStatus::InvalidLayout,
-                    ErrorKind::InvalidLayout,
-                    format!("the renderer rejected the layout: {message}"),
-                )
-            }
-            FromRenderer::Failed { message } => self.renderer_failed(format!("the renderer failed: {message}")),
-            FromRenderer::Acquire { id, tile } => {
-                if let Err(why) = self.check_tile(&tile) {
-                    return self.renderer_failed(format!("the renderer asked for an invalid tile {tile:?}: {why}"));
-                }
-                if self.free.is_empty() {
-                    self.queued.push_back((id, tile));
-                } else {
-                    self.grant(id, tile, renderer);
-                }
-                None
-            }
-            FromRenderer::Filled { slot, count } => {
-                let Some(Slot::Rendering { tile }) = self.slot_state(slot) else {
-                    return self.renderer_failed(format!("the renderer filled slot {slot}, which it did not hold"));
-                };
-                if count != tile.sample_count() {
-                    return self.renderer_failed(format!(
-                        "the renderer filled slot {slot} with {count} samples; its tile has {}",
-                        tile.sample_count()
-                    ));
-                }
-                self.slots[slot as usize] = Slot::Consuming;
-                if let Some(a) = self.active.as_mut() {
-                    a.delivered += count;
-                }
-                self.hand_to_technique(ToTechnique::Consume { slot, tile });
-                None
-            }
-            FromRenderer::EvaluateDone => {
-                let Some(a) = self.active.as_mut() else {
-                    return self.renderer_failed("the renderer finished a request nobody made".into());
-                };
-                a.renderer_done = true;
-                if let Some(t) = self.render_started.take() {
-                    self.render_time += t.elapsed();
-                }
-                self.check_complete()
-            }
-            FromRenderer::Ready { .. } => self.renderer_failed("the renderer sent ready twice".into()),
-        }
-    }
-
-    fn check_tile(&mut self, tile: &Tile) -> Result<(), String> {
-        let Some(a) = self.active.as_mut() else {
-            return Err("no request is in progress".into());
-        };
-        let n = tile.sample_count();
-        if n == 0 || n > self.pipe_size {
-            return Err(format!("{n} samples, pipe size is {}", self.pipe_size));
-        }
-        match tile {
-            Tile::Pixels { rect, spp } => {
-                if *spp as u64 != a.spp || !rect.is_inside(self.width, self.height) {
-                    return Err(format!("request is {} spp on {}×{}", a.spp, self.width, self.height));
-                }
-                a.pixel_acquired += n;
-                if a.pixel_acquired > a.pixel_expected {
-                    return Err(format!("more pixel samples than the {} requested", a.pixel_expected));
-                }
-                for y in rect.y0..rect.y1 {
-                    for x in rect.x0..rect.x1 {
-                        let i = y as usize * self.width as usize + x as usize;
-                        if a.covered[i / 64] & (1 << (i % 64)) != 0 {
-                            return Err(format!("pixel ({x}, {y}) is in two tiles of the same request"));
-                        }
-                        a.covered[i / 64] |= 1 << (i % 64);
-                    }
-                }
-            }
-            Tile::Samples { .. } => {
-                a.free_acquired += n;
-                if a.free_acquired > a.free_expected {
-                    return Err(format!("more free samples than the {} requested", a.free_expected));
-                }
-            }
-        }
-        Ok(())
-    }
-
-    fn check_complete(&mut self) -> End {
-        let Some(a) = &self.active else { return None };
-        if !a.renderer_done || self.slots.iter().any(|s| !matches!(s, Slot::Free | Slot::Rendering { .. })) {
-            return None;
-        }
-        if self.slots.iter().any(|s| matches!(s, Slot::Rendering { .. })) || !self.queued.is_empty() {
-            return self
-                .renderer_failed("the renderer reported the request done with tiles acquired but never filled".into());
-        }
-        if a.delivered != a.expected() {
-            let msg = format!("the renderer finished a request with {} of its {} samples", a.delivered, a.expected());
-            return self.renderer_failed(msg);
-        }
-        let delivered = a.delivered;
-        self.used += delivered;
-        self.active = None;
-        if let Some(since) = self.waiting_since.take() {
-            self.waiting += since.elapsed();
-        }
-        let remaining = self.budget - self.used;
-        self.send(&ToTechnique::EvaluateDone { delivered, remaining });
-        None
-    }
 }
