@@ -112,6 +112,7 @@ fn bench(size: u32) -> anyhow::Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
     println!("{size}×{size} pair, best of 3 (ms):");
     println!("{:<10} {:>12} {:>12} {:>12}", "metric", "1 thread", format!("{cores} threads"), "value");
+    let mut ssim_times = None;
     for metric in Metric::ALL {
         let mut times = Vec::new();
         let mut value = 0.0;
@@ -129,6 +130,63 @@ fn bench(size: u32) -> anyhow::Result<()> {
             times.push(best);
         }
         println!("{:<10} {:>12.1} {:>12.1} {:>12.6}", metric.acronym(), times[0], times[1], value);
+        if metric == Metric::Ssim {
+            ssim_times = Some((times[0], value));
+        }
+    }
+    if let Some((ours, value)) = ssim_times {
+        match scikit_image_ssim(&r, &t) {
+            Ok((theirs, their_value)) => println!(
+                "scikit-image SSIM on the same pair, 1 thread: {:.1} ms (value {their_value:.6}): ours is {:.1}× faster, values differ by {:.1e}",
+                theirs,
+                theirs / ours,
+                (their_value - value).abs()
+            ),
+            Err(e) => println!("(scikit-image not measured: {e})"),
+        }
     }
     Ok(())
+}
+
+/// Times scikit-image's SSIM (best of 3, one thread) on the same tone-mapped pair.
+fn scikit_image_ssim(r: &Image, t: &Image) -> anyhow::Result<(f64, f64)> {
+    let dir = tempfile::tempdir()?;
+    for (name, img) in [("ref", r), ("test", t)] {
+        let bytes: Vec<u8> = img.rgb.iter().flat_map(|v| v.to_le_bytes()).collect();
+        std::fs::write(dir.path().join(name), bytes)?;
+    }
+    let script = format!(
+        "import numpy as np, time\n\
+         from skimage.metrics import structural_similarity as s\n\
+         shape = ({h}, {w}, 3)\n\
+         def tm(v):\n\
+         \x20   v = np.clip(v.astype(np.float64), 0.0, 1.0)\n\
+         \x20   return 255.0 * np.where(v <= 0.0031308, v * 12.92, 1.055 * v ** (1 / 2.4) - 0.055)\n\
+         a = tm(np.fromfile('{d}/ref', dtype='<f4').reshape(shape))\n\
+         b = tm(np.fromfile('{d}/test', dtype='<f4').reshape(shape))\n\
+         best = 1e9\n\
+         for _ in range(3):\n\
+         \x20   t0 = time.perf_counter()\n\
+         \x20   v = s(a, b, data_range=255, gaussian_weights=True, sigma=1.5, use_sample_covariance=False, channel_axis=2)\n\
+         \x20   best = min(best, time.perf_counter() - t0)\n\
+         print(best * 1e3, v)\n",
+        h = r.height,
+        w = r.width,
+        d = dir.path().display()
+    );
+    let out = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .env("OMP_NUM_THREADS", "1")
+        .env("OPENBLAS_NUM_THREADS", "1")
+        .output()?;
+    if !out.status.success() {
+        anyhow::bail!("{}", String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("python3 failed"));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut parts = text.split_whitespace().map(|p| p.parse::<f64>());
+    match (parts.next(), parts.next()) {
+        (Some(Ok(ms)), Some(Ok(v))) => Ok((ms, v)),
+        _ => anyhow::bail!("unexpected output {text:?}"),
+    }
 }

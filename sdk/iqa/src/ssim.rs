@@ -23,6 +23,8 @@
 
 use crate::image::Image;
 use crate::pixelwise::{bits_table, tone_map_with};
+#[cfg(target_arch = "x86_64")]
+use crate::pixelwise::{bits_table_soa, tone_map_8};
 use rayon::prelude::*;
 
 /// First stabilising constant, (0.01 · 255)².
@@ -60,11 +62,16 @@ fn blur_row(row: &[f32], out: &mut [f32], k: &[f32; 2 * RADIUS + 1]) {
     let w = row.len();
     out.fill(0.0);
     if w > 2 * RADIUS {
-        // Interior: every tap in range, a loop the compiler vectorises.
-        for (j, kw) in k.iter().enumerate() {
-            let shifted = &row[j..w - 2 * RADIUS + j];
-            for (o, s) in out[RADIUS..w - RADIUS].iter_mut().zip(shifted) {
-                *o += kw * s;
+        // Interior: every tap in range, a loop the compiler vectorises. The
+        // kernel is symmetric: mirrored taps are added before multiplying.
+        let inner = w - 2 * RADIUS;
+        for (o, c) in out[RADIUS..w - RADIUS].iter_mut().zip(&row[RADIUS..RADIUS + inner]) {
+            *o = k[RADIUS] * c;
+        }
+        for j in 0..RADIUS {
+            let (left, right) = (&row[j..j + inner], &row[2 * RADIUS - j..2 * RADIUS - j + inner]);
+            for (o, (l, r)) in out[RADIUS..w - RADIUS].iter_mut().zip(left.iter().zip(right)) {
+                *o += k[j] * (l + r);
             }
         }
     }
@@ -82,10 +89,11 @@ fn blur_row(row: &[f32], out: &mut [f32], k: &[f32; 2 * RADIUS + 1]) {
     }
 }
 
-/// The five local statistics of one image row, horizontally blurred:
-/// x, y, x², y², xy (values shifted by −128).
+/// The local statistics of one image row, horizontally blurred: x, y,
+/// x² + y², xy (values shifted by −128). SSIM needs σx² + σy² only as a
+/// sum, so x² and y² share one plane.
 struct RowStats {
-    planes: [Vec<f32>; 5],
+    planes: [Vec<f32>; 4],
 }
 
 impl RowStats {
@@ -94,31 +102,45 @@ impl RowStats {
     }
 
     #[inline(always)]
-    fn compute(
+    fn compute<const AVX2: bool>(
         &mut self,
         reference: &Image,
         test: &Image,
         c: usize,
         y: usize,
-        scratch: &mut [Vec<f32>; 5],
+        scratch: &mut [Vec<f32>; 4],
         k: &[f32; 2 * RADIUS + 1],
     ) {
         let w = reference.width as usize;
         let (r, t) = (&reference.rgb[y * w * 3..(y + 1) * w * 3], &test.rgb[y * w * 3..(y + 1) * w * 3]);
         // Gather the channel into contiguous rows first: the tone map then
         // runs over plain slices, which vectorises.
-        let [a, b, aa, bb, ab] = scratch;
+        let [a, b, squares, ab] = scratch;
         for (x, (va, vb)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
             *va = r[x * 3 + c];
             *vb = t[x * 3 + c];
         }
         let table = bits_table();
-        for v in a.iter_mut().chain(b.iter_mut()) {
-            *v = tone_map_with(*v, table) - SHIFT;
+        for row in [&mut *a, &mut *b] {
+            let mut chunks = row.chunks_exact_mut(8);
+            #[cfg(target_arch = "x86_64")]
+            if AVX2 {
+                let (bases, slopes) = bits_table_soa();
+                for chunk in &mut chunks {
+                    let chunk: &mut [f32; 8] = chunk.try_into().expect("chunks of 8");
+                    // SAFETY: AVX2 is true only on the path whose caller detected AVX2 and FMA.
+                    unsafe { tone_map_8(chunk, bases, slopes) };
+                    for v in chunk.iter_mut() {
+                        *v -= SHIFT;
+                    }
+                }
+            }
+            for v in chunks.into_remainder() {
+                *v = tone_map_with(*v, table) - SHIFT;
+            }
         }
         for x in 0..w {
-            aa[x] = a[x] * a[x];
-            bb[x] = b[x] * b[x];
+            squares[x] = a[x] * a[x] + b[x] * b[x];
             ab[x] = a[x] * b[x];
         }
         for (plane, raw) in self.planes.iter_mut().zip(scratch.iter()) {
@@ -138,10 +160,10 @@ unsafe fn channel_rows_avx2(
     test: &Image,
     c: usize,
     rows: std::ops::Range<usize>,
-    out: &mut [f32],
+    out: Output<'_>,
     k: &[f32; 2 * RADIUS + 1],
 ) {
-    channel_rows(reference, test, c, rows, out, k)
+    channel_rows::<true>(reference, test, c, rows, out, k)
 }
 
 /// [`channel_rows`] at the best instruction set this CPU has.
@@ -150,7 +172,7 @@ fn channel_rows_dispatch(
     test: &Image,
     c: usize,
     rows: std::ops::Range<usize>,
-    out: &mut [f32],
+    out: Output<'_>,
     k: &[f32; 2 * RADIUS + 1],
 ) {
     #[cfg(target_arch = "x86_64")]
@@ -158,53 +180,73 @@ fn channel_rows_dispatch(
         // SAFETY: the features were just detected.
         return unsafe { channel_rows_avx2(reference, test, c, rows, out, k) };
     }
-    channel_rows(reference, test, c, rows, out, k)
+    channel_rows::<false>(reference, test, c, rows, out, k)
 }
 
-/// S for rows `rows` of channel `c`, written into `out` (one row after another).
+/// Where one band of rows of one channel goes: `(1 − S) / 3` added to the
+/// error map, and each row's sum of S over the columns `x0..x1`.
+struct Output<'a> {
+    map: &'a mut [f32],
+    row_sums: &'a mut [f64],
+    x0: usize,
+    x1: usize,
+}
+
+/// S for rows `rows` of channel `c`, accumulated into `out`.
 #[inline(always)]
-fn channel_rows(
+fn channel_rows<const AVX2: bool>(
     reference: &Image,
     test: &Image,
     c: usize,
     rows: std::ops::Range<usize>,
-    out: &mut [f32],
+    out: Output<'_>,
     k: &[f32; 2 * RADIUS + 1],
 ) {
     let (w, h) = (reference.width as usize, reference.height as usize);
     // A ring of the horizontally blurred statistics of the 11 rows a window needs.
     let mut ring: Vec<(isize, RowStats)> = (0..2 * RADIUS + 1).map(|_| (-1, RowStats::new(w))).collect();
-    let mut scratch: [Vec<f32>; 5] = std::array::from_fn(|_| vec![0f32; w]);
-    let mut sums: [Vec<f32>; 5] = std::array::from_fn(|_| vec![0f32; w]);
+    let mut scratch: [Vec<f32>; 4] = std::array::from_fn(|_| vec![0f32; w]);
+    let mut sums: [Vec<f32>; 4] = std::array::from_fn(|_| vec![0f32; w]);
+    let mut s_row = vec![0f32; w];
     for (i, y) in rows.enumerate() {
-        for s in sums.iter_mut() {
-            s.fill(0.0);
-        }
-        for (j, kw) in k.iter().enumerate() {
+        // Bring the window's 11 rows into the ring (each computed once).
+        let mut slots = [0usize; 2 * RADIUS + 1];
+        for (j, slot_of) in slots.iter_mut().enumerate() {
             let source = reflect(y as isize + j as isize - RADIUS as isize, h);
             // Rows mirrored at a border may repeat; the ring slot is keyed by source row.
             let slot = source % ring.len();
             if ring[slot].0 != source as isize {
-                ring[slot].1.compute(reference, test, c, source, &mut scratch, k);
+                ring[slot].1.compute::<AVX2>(reference, test, c, source, &mut scratch, k);
                 ring[slot].0 = source as isize;
             }
-            for (sum, plane) in sums.iter_mut().zip(&ring[slot].1.planes) {
-                for (s, v) in sum.iter_mut().zip(plane) {
-                    *s += kw * v;
+            *slot_of = slot;
+        }
+        // Vertical blur, mirrored rows added before multiplying.
+        for (p, sum) in sums.iter_mut().enumerate() {
+            for (s, v) in sum.iter_mut().zip(&ring[slots[RADIUS]].1.planes[p]) {
+                *s = k[RADIUS] * v;
+            }
+            for j in 0..RADIUS {
+                let (top, bottom) = (&ring[slots[j]].1.planes[p], &ring[slots[2 * RADIUS - j]].1.planes[p]);
+                for (s, (a, b)) in sum.iter_mut().zip(top.iter().zip(bottom)) {
+                    *s += k[j] * (a + b);
                 }
             }
         }
-        let out_row = &mut out[i * w..(i + 1) * w];
+        let map_row = &mut out.map[i * w..(i + 1) * w];
         // In f32: the sums it reads are f32 already, and 8 lanes beat 4.
         let (c1, c2, shift) = (C1 as f32, C2 as f32, SHIFT);
-        for x in 0..w {
+        for (x, s) in s_row.iter_mut().enumerate() {
             let (ux, uy) = (sums[0][x], sums[1][x]);
-            let vx = sums[2][x] - ux * ux;
-            let vy = sums[3][x] - uy * uy;
-            let vxy = sums[4][x] - ux * uy;
+            let variances = sums[2][x] - ux * ux - uy * uy;
+            let vxy = sums[3][x] - ux * uy;
             let (ux, uy) = (ux + shift, uy + shift);
-            out_row[x] = ((2.0 * ux * uy + c1) * (2.0 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
+            *s = ((2.0 * ux * uy + c1) * (2.0 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (variances + c2));
         }
+        for (m, s) in map_row.iter_mut().zip(&s_row) {
+            *m += (1.0 - s) * (1.0 / 3.0);
+        }
+        out.row_sums[i] = s_row[out.x0..out.x1].iter().map(|v| *v as f64).sum();
     }
 }
 
@@ -218,17 +260,15 @@ pub(crate) fn ssim(reference: &Image, test: &Image) -> (f64, Vec<f32>) {
     // Bands of rows per task: each recomputes the 10 halo rows it shares with its neighbours.
     let band = (h / (4 * rayon::current_num_threads())).clamp(32, 256).min(h.max(1));
     let mut map = vec![0f32; w * h];
+    let mut row_sums = vec![0f64; h];
     let mut total = 0.0;
-    let mut s = vec![0f32; w * h];
     for c in 0..3 {
-        s.par_chunks_mut(band * w).enumerate().for_each(|(b, chunk)| {
+        map.par_chunks_mut(band * w).zip(row_sums.par_chunks_mut(band)).enumerate().for_each(|(b, (map, sums))| {
             let start = b * band;
-            channel_rows_dispatch(reference, test, c, start..start + chunk.len() / w.max(1), chunk, &k);
+            let rows = start..start + sums.len();
+            channel_rows_dispatch(reference, test, c, rows, Output { map, row_sums: sums, x0, x1 }, &k);
         });
-        let rows: Vec<f64> =
-            (y0..y1).map(|y| s[y * w + x0..y * w + x1].iter().map(|v| *v as f64).sum::<f64>()).collect();
-        total += rows.iter().sum::<f64>() / ((x1 - x0) * (y1 - y0)) as f64;
-        map.par_iter_mut().zip(&s).for_each(|(m, v)| *m += (1.0 - v) / 3.0);
+        total += row_sums[y0..y1].iter().sum::<f64>() / ((x1 - x0) * (y1 - y0)) as f64;
     }
     (total / 3.0, map)
 }
