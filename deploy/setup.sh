@@ -24,7 +24,16 @@ fi
 # Independent implementations the metric tests compare against.
 PIP_PACKAGES=(numpy scikit-image flip-evaluator)
 if ! python3 -c "import numpy, skimage, flip_evaluator" >/dev/null 2>&1; then
-    python3 -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}"
+    if ! python3 -m pip --version >/dev/null 2>&1; then
+        sudo_cmd=""
+        [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
+        $sudo_cmd apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq python3-pip
+    fi
+    # Debian's own Python refuses system-wide pip installs (PEP 668); these
+    # are test tools only, so allow it there.
+    python3 -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}" \
+        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages "${PIP_PACKAGES[@]}"
 fi
 
 if ! cargo nextest --version >/dev/null 2>&1; then
