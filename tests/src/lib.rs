@@ -37,3 +37,13 @@ pub fn renderer_argv(scene: &Path, flags: &[&str]) -> Vec<String> {
     argv.push(scene.to_string_lossy().into_owned());
     argv
 }
+
+/// Writes a scene directory's `fbksd-scene.json`.
+pub fn scene_meta(dir: &Path, name: &str, file: &str, renderer: &str, spp: &[u64], width: u32, height: u32) {
+    let meta = serde_json::json!({
+        "name": name, "path": file, "ref-img": "reference.exr", "renderer": renderer,
+        "category": "experimental", "tags": [], "spp": spp, "width": width, "height": height,
+        "reference": {"method": "render", "spp": 4096}, "description": "a test scene",
+    });
+    std::fs::write(dir.join("fbksd-scene.json"), serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+}

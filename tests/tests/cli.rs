@@ -1,6 +1,6 @@
 //! `fbksd run` as a user types it.
 
-use fbksd_tests::{analytic_scene, bin};
+use fbksd_tests::{analytic_scene, bin, scene_meta};
 use std::process::Command;
 
 #[test]
@@ -95,13 +95,7 @@ fn a_scene_directory_brings_its_renderer_and_budgets() {
     let scene_dir = dir.path().join("tiny");
     std::fs::create_dir(&scene_dir).unwrap();
     analytic_scene(&scene_dir, "tiny", 6, 5);
-    std::fs::write(
-        scene_dir.join("fbksd-scene.json"),
-        r#"{"name": "tiny", "path": "tiny.json", "ref-img": "reference.exr", "renderer": "analytic",
-            "category": "experimental", "tags": [], "spp": [2, 3], "width": 6, "height": 5,
-            "reference": {"method": "render", "spp": 64}, "description": "test"}"#,
-    )
-    .unwrap();
+    scene_meta(&scene_dir, "tiny", "tiny.json", "analytic", &[2, 3], 6, 5);
     let results = dir.path().join("out");
     let output = Command::new(bin("fbksd"))
         .args([

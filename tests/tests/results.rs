@@ -1,7 +1,7 @@
 //! `fbksd results compute` and `fbksd results show` on a real benchmark of
 //! a small procedural scene, with an external metric plugged in.
 
-use fbksd_tests::bin;
+use fbksd_tests::{bin, scene_meta};
 use std::os::unix::fs::PermissionsExt;
 use std::process::Command;
 
@@ -22,13 +22,7 @@ fn results_are_computed_incrementally_and_ranked() {
     let scene = scenes.join("ramp");
     std::fs::create_dir_all(&scene).unwrap();
     std::fs::write(scene.join("ramp.expr"), "width := 24;\nheight := 16;\n#\nvar v := IMAGE_X / width * LIGHT_X * 2;\nCOLOR_R := v; COLOR_G := v; COLOR_B := 1 - v;\n").unwrap();
-    std::fs::write(
-        scene.join("fbksd-scene.json"),
-        r#"{"name": "ramp", "path": "ramp.expr", "ref-img": "reference.exr", "renderer": "procedural",
-            "category": "experimental", "tags": [], "spp": [1, 8], "width": 24, "height": 16,
-            "reference": {"method": "render", "spp": 4096}, "description": "test"}"#,
-    )
-    .unwrap();
+    scene_meta(&scene, "ramp", "ramp.expr", "procedural", &[1, 8], 24, 16);
     let out = Command::new(bin("fbksd-procedural")).arg("reference").arg(&scene).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stdout).contains("4096 spp, estimated RMS error"));
