@@ -53,10 +53,7 @@ pub enum ShmError {
 impl SharedRegion {
     /// Creates a zero-filled file of `len` bytes (it must not exist) and maps it.
     pub fn create(path: &Path, len: u64) -> Result<Self, ShmError> {
-        let io = |source| ShmError::Io { path: path.to_path_buf(), source };
-        let file = OpenOptions::new().read(true).write(true).create_new(true).open(path).map_err(io)?;
-        file.set_len(len).map_err(io)?;
-        Self::map(file, path, len)
+        Self::map(create_file(path, len)?, path, len)
     }
 
     /// Opens and maps an existing file, checking its size.
@@ -161,9 +158,7 @@ impl Ring {
     /// the manager never touches sample data, so it never maps the ring).
     pub fn create_file(dir: &Path, spec: RingSpec) -> Result<PathBuf, ShmError> {
         let path = dir.join(spec.file_name());
-        let io = |source| ShmError::Io { path: path.clone(), source };
-        let file = OpenOptions::new().write(true).create_new(true).open(&path).map_err(io)?;
-        file.set_len(spec.total_bytes()).map_err(io)?;
+        create_file(&path, spec.total_bytes())?;
         Ok(path)
     }
 
@@ -197,6 +192,15 @@ impl Ring {
         // SAFETY: forwarded to the caller.
         unsafe { self.region.floats_mut(slot as usize * self.spec.slot_bytes as usize, floats) }
     }
+}
+
+/// Creates a zero-filled file of `len` bytes, which must not exist yet,
+/// open for reading and writing.
+pub fn create_file(path: &Path, len: u64) -> Result<File, ShmError> {
+    let io = |source| ShmError::Io { path: path.to_path_buf(), source };
+    let file = OpenOptions::new().read(true).write(true).create_new(true).open(path).map_err(io)?;
+    file.set_len(len).map_err(io)?;
+    Ok(file)
 }
 
 /// Rejects names that are not a single path component.

@@ -243,6 +243,16 @@ pub enum IqaError {
     External(String),
 }
 
+/// The image's values with NaN and infinity read as 0, copied only when
+/// `nonfinite` says there are any.
+fn finite_or_zero(img: &Image, nonfinite: u64) -> std::borrow::Cow<'_, [f32]> {
+    if nonfinite == 0 {
+        std::borrow::Cow::Borrowed(&img.rgb)
+    } else {
+        img.rgb.iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect::<Vec<f32>>().into()
+    }
+}
+
 /// Computes a built-in metric.
 pub fn evaluate(metric: Metric, reference: &Image, test: &Image) -> Result<Evaluation, IqaError> {
     if (reference.width, reference.height) != (test.width, test.height) {
@@ -253,9 +263,9 @@ pub fn evaluate(metric: Metric, reference: &Image, test: &Image) -> Result<Evalu
     }
     if matches!(metric, Metric::Flip | Metric::HdrFlip) {
         let (nonfinite_reference, nonfinite_test) = pixelwise::count_nonfinite(reference, test);
-        // ꟻLIP filters the whole image: non-finite values read as 0 (and are counted).
-        let clean = |img: &Image| img.rgb.iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect::<Vec<f32>>();
-        let (r, t) = (clean(reference), clean(test));
+        // ꟻLIP filters the whole image: non-finite values read as 0 (and are
+        // counted); copied only when there are any.
+        let (r, t) = (finite_or_zero(reference, nonfinite_reference), finite_or_zero(test, nonfinite_test));
         let (w, h) = (reference.width as usize, reference.height as usize);
         let ppd = flip::default_ppd();
         let values = if metric == Metric::Flip {

@@ -155,32 +155,27 @@ impl RowStats {
 /// The CPU must support AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn channel_rows_avx2(
-    reference: &Image,
-    test: &Image,
-    c: usize,
-    rows: std::ops::Range<usize>,
-    out: Output<'_>,
-    k: &[f32; 2 * RADIUS + 1],
-) {
-    channel_rows::<true>(reference, test, c, rows, out, k)
+unsafe fn channel_rows_avx2(band: Band<'_>, out: Output<'_>) {
+    channel_rows::<true>(band, out)
 }
 
 /// [`channel_rows`] at the best instruction set this CPU has.
-fn channel_rows_dispatch(
-    reference: &Image,
-    test: &Image,
-    c: usize,
-    rows: std::ops::Range<usize>,
-    out: Output<'_>,
-    k: &[f32; 2 * RADIUS + 1],
-) {
+fn channel_rows_dispatch(band: Band<'_>, out: Output<'_>) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
         // SAFETY: the features were just detected.
-        return unsafe { channel_rows_avx2(reference, test, c, rows, out, k) };
+        return unsafe { channel_rows_avx2(band, out) };
     }
-    channel_rows::<false>(reference, test, c, rows, out, k)
+    channel_rows::<false>(band, out)
+}
+
+/// One band of rows of one channel to compute.
+struct Band<'a> {
+    reference: &'a Image,
+    test: &'a Image,
+    c: usize,
+    rows: std::ops::Range<usize>,
+    k: &'a [f32; 2 * RADIUS + 1],
 }
 
 /// Where one band of rows of one channel goes: `(1 − S) / 3` added to the
@@ -194,14 +189,8 @@ struct Output<'a> {
 
 /// S for rows `rows` of channel `c`, accumulated into `out`.
 #[inline(always)]
-fn channel_rows<const AVX2: bool>(
-    reference: &Image,
-    test: &Image,
-    c: usize,
-    rows: std::ops::Range<usize>,
-    out: Output<'_>,
-    k: &[f32; 2 * RADIUS + 1],
-) {
+fn channel_rows<const AVX2: bool>(band: Band<'_>, out: Output<'_>) {
+    let Band { reference, test, c, rows, k } = band;
     let (w, h) = (reference.width as usize, reference.height as usize);
     // A ring of the horizontally blurred statistics of the 11 rows a window needs.
     let mut ring: Vec<(isize, RowStats)> = (0..2 * RADIUS + 1).map(|_| (-1, RowStats::new(w))).collect();
@@ -266,7 +255,7 @@ pub(crate) fn ssim(reference: &Image, test: &Image) -> (f64, Vec<f32>) {
         map.par_chunks_mut(band * w).zip(row_sums.par_chunks_mut(band)).enumerate().for_each(|(b, (map, sums))| {
             let start = b * band;
             let rows = start..start + sums.len();
-            channel_rows_dispatch(reference, test, c, rows, Output { map, row_sums: sums, x0, x1 }, &k);
+            channel_rows_dispatch(Band { reference, test, c, rows, k: &k }, Output { map, row_sums: sums, x0, x1 });
         });
         total += row_sums[y0..y1].iter().sum::<f64>() / ((x1 - x0) * (y1 - y0)) as f64;
     }

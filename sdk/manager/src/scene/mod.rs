@@ -335,13 +335,7 @@ impl SceneRunner {
         let result_path = self.dir.path().join(&result_file);
         // The manager never maps the result: it reads it once, with pread,
         // so a technique that truncates the file cannot crash it.
-        let result_buffer = match std::fs::File::options()
-            .read(true)
-            .write(true)
-            .create_new(true)
-            .open(&result_path)
-            .and_then(|f| f.set_len(pixels * 12).map(|_| f))
-        {
+        let result_buffer = match fbksd_core::shm::create_file(&result_path, pixels * 12) {
             Ok(f) => f,
             Err(e) => {
                 outcome.status = RunStatus::LaunchFailed;
