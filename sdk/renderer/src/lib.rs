@@ -41,6 +41,7 @@
 #![deny(missing_docs)]
 
 mod plan;
+pub mod sampler;
 mod server;
 
 pub use plan::plan_tiles;

@@ -311,6 +311,23 @@ impl Evaluation {
         plan_tiles(self.width, self.height, self.spp, self.remaining, self.tile_size, self.pipe_size, threads)
     }
 
+    /// The plan, each tile with the index of its first pixel-free sample
+    /// within the request (count tiles are numbered in plan order), so
+    /// tiles can be filled in any order and still draw reproducible samples.
+    pub fn plan_with_free_starts(&self) -> Vec<(Tile, u64)> {
+        let mut next = 0u64;
+        self.plan()
+            .into_iter()
+            .map(|t| {
+                let first = next;
+                if let Tile::Samples { count } = t {
+                    next += count;
+                }
+                (t, first)
+            })
+            .collect()
+    }
+
     /// Acquires a slot for `tile`, blocking until one is free (and, for
     /// INPUT layouts, until the technique has written its parameters).
     pub fn pipe(&self, tile: Tile) -> Result<SamplesPipe<'_>, RendererError> {
