@@ -3,8 +3,8 @@
 # Idempotent: run it as often as you like.
 set -euo pipefail
 
-# Debian packages the build and the tests need.
-APT_PACKAGES=(build-essential pkg-config)
+# Debian packages the build and the tests need (Embree 3 for the path tracer).
+APT_PACKAGES=(build-essential pkg-config libembree-dev)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -39,3 +39,6 @@ fi
 if ! cargo nextest --version >/dev/null 2>&1; then
     cargo install cargo-nextest --locked
 fi
+
+# The procedurally authored parts of the production scene pool (deterministic, a second or two).
+python3 "$(dirname "$0")/../scenes/production/generate.py"

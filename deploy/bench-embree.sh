@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Speed of the Embree path tracer beside Mitsuba 3 (llvm_ad_rgb) in one run:
+# the Cornell box at 512×512, 64 spp, same maximum path depth, one thread and
+# all cores; then the hair scene; then how far the two Cornell images agree.
+# Installs Mitsuba (PyPI) and LLVM 19 (Debian) when missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash deploy/setup.sh
+if ! dpkg-query -W -f='${Status}' libllvm19 2>/dev/null | grep -q "install ok installed"; then
+    sudo_cmd=""
+    [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
+    DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq libllvm19
+fi
+python3 -c "import mitsuba" 2>/dev/null || python3 -m pip install --quiet mitsuba \
+    || python3 -m pip install --quiet --break-system-packages mitsuba
+cargo build --release --locked -p fbksd-embree -p fbksd-cli
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+cornell=scenes/production/cornell-box/scene.pbrt
+./target/release/fbksd-embree export-mitsuba "$cornell" "$out/mitsuba-scene"
+echo "== Cornell box, 512×512, 64 spp =="
+./target/release/fbksd-embree bench "$cornell" --spp 64 --out-dir "$out/ours"
+python3 renderers/embree/bench/mitsuba_bench.py "$out/mitsuba-scene" 64 "$out/mitsuba.exr"
+echo "== Hair, 512×512, 16 spp =="
+./target/release/fbksd-embree bench scenes/production/hair/scene.pbrt --spp 16
+echo "== Agreement of the two Cornell images (each 64 spp) =="
+for metric in relmse psnr; do
+    echo "$metric: $(./target/release/fbksd iqa "$metric" "$out/mitsuba.exr" "$out/ours/cornell-box.exr")"
+done

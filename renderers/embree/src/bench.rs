@@ -1,0 +1,106 @@
+//! `fbksd-embree bench`: samples and rays per second, one thread and all
+//! cores, best of three runs each.
+
+use crate::render::render_image;
+use std::path::Path;
+use std::time::Instant;
+
+/// Times each scene and prints one line per scene.
+pub fn run(scenes: &[std::path::PathBuf], spp: u64, out_dir: Option<&Path>) -> anyhow::Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    for path in scenes {
+        let scene = crate::pbrt::load(path)?;
+        let samples = scene.width() as f64 * scene.height() as f64 * spp as f64;
+        let mut line = format!(
+            "{:<24} {}×{} × {spp} spp, max depth {}:",
+            scene.name,
+            scene.width(),
+            scene.height(),
+            scene.max_depth
+        );
+        for threads in [1, cores] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+            let runs = if threads == 1 { 1 } else { 3 };
+            let mut best = f64::INFINITY;
+            let mut rays = 0;
+            for i in 0..runs {
+                let t = Instant::now();
+                let image = pool.install(|| render_image(&scene, spp, i));
+                best = best.min(t.elapsed().as_secs_f64());
+                rays = image.rays;
+                if let (Some(dir), true) = (out_dir, threads == cores && i == 0) {
+                    std::fs::create_dir_all(dir)?;
+                    fbksd_manager::results::write_exr(
+                        &dir.join(format!("{}.exr", scene.name)),
+                        scene.width(),
+                        scene.height(),
+                        &image.rgb,
+                    )?;
+                }
+            }
+            line += &format!(
+                "  {threads} thread{}: {:.2} M samples/s, {:.1} M rays/s",
+                if threads == 1 { "" } else { "s" },
+                samples / best / 1e6,
+                rays as f64 / best / 1e6
+            );
+        }
+        println!("{line}");
+    }
+    println!("(all features off: colour only; {cores} cores; best of 3 on all cores, 1 run on one thread)");
+    Ok(())
+}
+
+/// Writes a scene made of diffuse triangle meshes, mesh area lights and a
+/// pinhole camera as binary PLY files plus `scene.json`, which
+/// `bench/mitsuba_bench.py` turns into the same scene for Mitsuba 3.
+pub fn export_for_mitsuba(path: &Path, dir: &Path) -> anyhow::Result<()> {
+    use crate::scene::light::Light;
+    use crate::scene::material::Material;
+    use crate::scene::shape::Geometry;
+    use anyhow::bail;
+    let scene = crate::pbrt::load(path)?;
+    std::fs::create_dir_all(dir)?;
+    if scene.camera.has_dof() || scene.has_motion {
+        bail!("export: only pinhole cameras and static scenes");
+    }
+    let mut shapes = Vec::new();
+    for (i, shape) in scene.shapes.iter().enumerate() {
+        let Geometry::Mesh { positions, indices, .. } = &shape.geometry else {
+            bail!("export: shape {i} is not a mesh")
+        };
+        let Material::Diffuse { reflectance } = &scene.materials[shape.material as usize] else {
+            bail!("export: shape {i} is not diffuse")
+        };
+        let reflectance = reflectance.constant().ok_or_else(|| anyhow::anyhow!("export: shape {i} is textured"))?;
+        let mut ply = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            positions[0].len(),
+            indices.len()
+        )
+        .into_bytes();
+        for p in &positions[0] {
+            p.iter().for_each(|v| ply.extend(v.to_le_bytes()));
+        }
+        for t in indices {
+            ply.push(3);
+            t.iter().for_each(|v| ply.extend((*v as i32).to_le_bytes()));
+        }
+        let file = format!("shape{i}.ply");
+        std::fs::write(dir.join(&file), ply)?;
+        let emitter = match shape.light.map(|l| &scene.lights[l as usize]) {
+            Some(Light::Mesh { radiance, two_sided: false, .. }) => Some(radiance.to_array()),
+            None => None,
+            Some(_) => bail!("export: shape {i}'s light is not a one-sided mesh light"),
+        };
+        shapes.push(serde_json::json!({"ply": file, "reflectance": reflectance.to_array(), "emitter": emitter}));
+    }
+    let c = &scene.camera;
+    let fov = 2.0 * c.tan_half_fov.atan().to_degrees();
+    let json = serde_json::json!({
+        "width": c.width, "height": c.height, "fov": fov, "max_depth": scene.max_depth,
+        "camera_to_world": c.camera_to_world.m, "shapes": shapes,
+    });
+    std::fs::write(dir.join("scene.json"), serde_json::to_vec_pretty(&json)?)?;
+    Ok(())
+}

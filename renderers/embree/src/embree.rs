@@ -1,0 +1,345 @@
+//! A small safe layer over Embree 3 (Debian's `libembree-dev`): a device, a
+//! scene of triangle meshes, spheres and Bézier curves with optional linear
+//! motion (two time steps), and single-ray intersection and occlusion.
+//!
+//! Hand-written rather than a binding crate: the renderer uses a dozen
+//! entry points, and the crates on the registry target other Embree
+//! versions or wrap far more than this needs. The struct layouts below are
+//! those of Embree 3.13 with `RTC_MAX_INSTANCE_LEVEL_COUNT` 1 and
+//! `RTC_MIN_WIDTH` 0 (checked against the installed `rtcore_config.h` by a
+//! test).
+
+use std::ffi::c_void;
+use std::ptr::NonNull;
+
+mod sys {
+    use std::ffi::{c_char, c_uint, c_void};
+
+    pub type Device = *mut c_void;
+    pub type Scene = *mut c_void;
+    pub type Geometry = *mut c_void;
+
+    pub const GEOMETRY_TRIANGLE: c_uint = 0;
+    pub const GEOMETRY_ROUND_BEZIER_CURVE: c_uint = 24;
+    pub const GEOMETRY_FLAT_BEZIER_CURVE: c_uint = 25;
+    pub const GEOMETRY_SPHERE_POINT: c_uint = 50;
+    pub const BUFFER_INDEX: c_uint = 0;
+    pub const BUFFER_VERTEX: c_uint = 1;
+    pub const FORMAT_UINT: c_uint = 0x5001;
+    pub const FORMAT_UINT3: c_uint = 0x5003;
+    pub const FORMAT_FLOAT3: c_uint = 0x9003;
+    pub const FORMAT_FLOAT4: c_uint = 0x9004;
+    pub const SCENE_FLAG_ROBUST: c_uint = 1 << 2;
+    pub const BUILD_QUALITY_HIGH: c_uint = 2;
+    pub const INVALID_ID: c_uint = u32::MAX;
+
+    #[repr(C, align(16))]
+    #[derive(Debug, Clone, Copy)]
+    pub struct Ray {
+        pub org: [f32; 3],
+        pub tnear: f32,
+        pub dir: [f32; 3],
+        pub time: f32,
+        pub tfar: f32,
+        pub mask: c_uint,
+        pub id: c_uint,
+        pub flags: c_uint,
+    }
+
+    #[repr(C, align(16))]
+    #[derive(Debug, Clone, Copy)]
+    pub struct Hit {
+        pub ng: [f32; 3],
+        pub u: f32,
+        pub v: f32,
+        pub prim_id: c_uint,
+        pub geom_id: c_uint,
+        pub inst_id: [c_uint; 1],
+    }
+
+    #[repr(C, align(16))]
+    #[derive(Debug, Clone, Copy)]
+    pub struct RayHit {
+        pub ray: Ray,
+        pub hit: Hit,
+    }
+
+    #[repr(C)]
+    pub struct IntersectContext {
+        pub flags: c_uint,
+        pub filter: *const c_void,
+        pub inst_id: [c_uint; 1],
+    }
+
+    #[link(name = "embree3")]
+    extern "C" {
+        pub fn rtcNewDevice(config: *const c_char) -> Device;
+        pub fn rtcReleaseDevice(device: Device);
+        pub fn rtcGetDeviceError(device: Device) -> c_uint;
+        pub fn rtcNewScene(device: Device) -> Scene;
+        pub fn rtcReleaseScene(scene: Scene);
+        pub fn rtcSetSceneFlags(scene: Scene, flags: c_uint);
+        pub fn rtcSetSceneBuildQuality(scene: Scene, quality: c_uint);
+        pub fn rtcCommitScene(scene: Scene);
+        pub fn rtcNewGeometry(device: Device, kind: c_uint) -> Geometry;
+        pub fn rtcReleaseGeometry(geometry: Geometry);
+        pub fn rtcSetGeometryTimeStepCount(geometry: Geometry, count: c_uint);
+        pub fn rtcSetNewGeometryBuffer(
+            geometry: Geometry,
+            kind: c_uint,
+            slot: c_uint,
+            format: c_uint,
+            stride: usize,
+            count: usize,
+        ) -> *mut c_void;
+        pub fn rtcCommitGeometry(geometry: Geometry);
+        pub fn rtcAttachGeometry(scene: Scene, geometry: Geometry) -> c_uint;
+        pub fn rtcIntersect1(scene: Scene, context: *mut IntersectContext, rayhit: *mut RayHit);
+        pub fn rtcOccluded1(scene: Scene, context: *mut IntersectContext, ray: *mut Ray);
+    }
+}
+
+/// An Embree error, with the call that raised it.
+#[derive(Debug, thiserror::Error)]
+#[error("Embree error {code} in {call}")]
+pub struct EmbreeError {
+    code: u32,
+    call: &'static str,
+}
+
+/// The shape of one geometry's primitives; each holds one slice per time
+/// step (two for linear motion).
+#[derive(Debug, Clone)]
+pub enum Primitives<'a> {
+    /// Triangles.
+    Triangles {
+        /// Vertex positions per time step.
+        positions: Vec<&'a [[f32; 3]]>,
+        /// Vertex indices.
+        indices: &'a [[u32; 3]],
+    },
+    /// Spheres.
+    Spheres {
+        /// (centre, radius) per time step.
+        spheres: Vec<&'a [[f32; 4]]>,
+    },
+    /// Cubic Bézier curves.
+    Curves {
+        /// Control points (x, y, z, radius) per time step.
+        points: Vec<&'a [[f32; 4]]>,
+        /// The first control point of each segment.
+        first_point: &'a [u32],
+        /// Tubes; otherwise ribbons facing the ray.
+        round: bool,
+    },
+}
+
+/// A committed scene, ready for rays from many threads.
+pub struct Bvh {
+    device: NonNull<c_void>,
+    scene: NonNull<c_void>,
+}
+
+// SAFETY: Embree documents a committed scene as safe to query concurrently,
+// and the device as thread-safe.
+unsafe impl Send for Bvh {}
+unsafe impl Sync for Bvh {}
+
+impl Drop for Bvh {
+    fn drop(&mut self) {
+        // SAFETY: both handles were created by this struct and are released once.
+        unsafe {
+            sys::rtcReleaseScene(self.scene.as_ptr());
+            sys::rtcReleaseDevice(self.device.as_ptr());
+        }
+    }
+}
+
+/// What a ray hit: distance, geometry, primitive, Embree's (u, v) and the
+/// unnormalised geometric normal.
+#[derive(Debug, Clone, Copy)]
+pub struct RayHit {
+    /// Distance along the (unnormalised) direction.
+    pub t: f32,
+    /// The geometry, in the order given to [`Bvh::build`].
+    pub geometry: u32,
+    /// The primitive within it.
+    pub primitive: u32,
+    /// Barycentric (triangles) or curve parameter.
+    pub uv: [f32; 2],
+    /// Geometric normal, not normalised.
+    pub ng: [f32; 3],
+}
+
+fn check(device: sys::Device, call: &'static str) -> Result<(), EmbreeError> {
+    // SAFETY: device is a live device handle.
+    let code = unsafe { sys::rtcGetDeviceError(device) };
+    if code == 0 {
+        Ok(())
+    } else {
+        Err(EmbreeError { code, call })
+    }
+}
+
+/// Fills a new Embree buffer from a slice.
+///
+/// # Safety
+/// `geometry` is a live geometry; `T` matches `format` and `stride`.
+unsafe fn fill_buffer<T: Copy>(geometry: sys::Geometry, kind: u32, slot: u32, format: u32, data: &[T]) -> *mut c_void {
+    // Embree reads 16 bytes past the last vertex; a new buffer is padded for that.
+    // SAFETY: per the contract above.
+    let ptr = unsafe {
+        sys::rtcSetNewGeometryBuffer(geometry, kind, slot, format, std::mem::size_of::<T>(), data.len().max(1))
+    };
+    if !ptr.is_null() {
+        // SAFETY: Embree allocated at least data.len() items of this stride.
+        unsafe { std::ptr::copy_nonoverlapping(data.as_ptr(), ptr as *mut T, data.len()) };
+    }
+    ptr
+}
+
+impl Bvh {
+    /// Builds a scene of `geometries`; geometry `i` is reported as `i`.
+    pub fn build(geometries: &[Primitives<'_>]) -> Result<Bvh, EmbreeError> {
+        let robust = std::env::var_os("FBKSD_EMBREE_ROBUST").is_some();
+        // SAFETY: plain constructor calls; every handle is checked and owned below.
+        unsafe {
+            let device = sys::rtcNewDevice(std::ptr::null());
+            let device = NonNull::new(device).ok_or(EmbreeError { code: 1, call: "rtcNewDevice" })?;
+            let scene = sys::rtcNewScene(device.as_ptr());
+            let bvh = Bvh { device, scene: NonNull::new(scene).ok_or(EmbreeError { code: 1, call: "rtcNewScene" })? };
+            if robust {
+                // Watertight traversal: no ray slips through an edge shared by two triangles.
+                sys::rtcSetSceneFlags(scene, sys::SCENE_FLAG_ROBUST);
+            }
+            sys::rtcSetSceneBuildQuality(scene, sys::BUILD_QUALITY_HIGH);
+            for (i, primitives) in geometries.iter().enumerate() {
+                let id = bvh.attach(primitives)?;
+                assert_eq!(id as usize, i, "Embree numbers geometries in attachment order");
+            }
+            sys::rtcCommitScene(scene);
+            check(device.as_ptr(), "rtcCommitScene")?;
+            Ok(bvh)
+        }
+    }
+
+    fn attach(&self, primitives: &Primitives<'_>) -> Result<u32, EmbreeError> {
+        let device = self.device.as_ptr();
+        let (kind, steps) = match primitives {
+            Primitives::Triangles { positions, .. } => (sys::GEOMETRY_TRIANGLE, positions.len()),
+            Primitives::Spheres { spheres } => (sys::GEOMETRY_SPHERE_POINT, spheres.len()),
+            Primitives::Curves { points, round, .. } => {
+                (if *round { sys::GEOMETRY_ROUND_BEZIER_CURVE } else { sys::GEOMETRY_FLAT_BEZIER_CURVE }, points.len())
+            }
+        };
+        // SAFETY: the geometry is created here, filled with buffers of the
+        // declared formats, committed, attached, then released (the scene
+        // keeps its own reference).
+        unsafe {
+            let geometry = sys::rtcNewGeometry(device, kind);
+            check(device, "rtcNewGeometry")?;
+            sys::rtcSetGeometryTimeStepCount(geometry, steps as u32);
+            match primitives {
+                Primitives::Triangles { positions, indices } => {
+                    for (slot, p) in positions.iter().enumerate() {
+                        fill_buffer(geometry, sys::BUFFER_VERTEX, slot as u32, sys::FORMAT_FLOAT3, pad(p).as_slice());
+                    }
+                    fill_buffer(geometry, sys::BUFFER_INDEX, 0, sys::FORMAT_UINT3, indices);
+                }
+                Primitives::Spheres { spheres } => {
+                    for (slot, s) in spheres.iter().enumerate() {
+                        fill_buffer(geometry, sys::BUFFER_VERTEX, slot as u32, sys::FORMAT_FLOAT4, s);
+                    }
+                }
+                Primitives::Curves { points, first_point, .. } => {
+                    for (slot, p) in points.iter().enumerate() {
+                        fill_buffer(geometry, sys::BUFFER_VERTEX, slot as u32, sys::FORMAT_FLOAT4, p);
+                    }
+                    fill_buffer(geometry, sys::BUFFER_INDEX, 0, sys::FORMAT_UINT, first_point);
+                }
+            }
+            check(device, "rtcSetNewGeometryBuffer")?;
+            sys::rtcCommitGeometry(geometry);
+            let id = sys::rtcAttachGeometry(self.scene.as_ptr(), geometry);
+            sys::rtcReleaseGeometry(geometry);
+            check(device, "rtcAttachGeometry")?;
+            Ok(id)
+        }
+    }
+
+    fn context() -> sys::IntersectContext {
+        sys::IntersectContext { flags: 0, filter: std::ptr::null(), inst_id: [sys::INVALID_ID] }
+    }
+
+    /// The closest hit along `org + t·dir` for `t` in (`tnear`, `tfar`) at `time` ∈ [0, 1].
+    #[inline]
+    pub fn intersect(&self, org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32, time: f32) -> Option<RayHit> {
+        let mut rayhit = sys::RayHit {
+            ray: sys::Ray { org, tnear, dir, time, tfar, mask: u32::MAX, id: 0, flags: 0 },
+            hit: sys::Hit {
+                ng: [0.0; 3],
+                u: 0.0,
+                v: 0.0,
+                prim_id: sys::INVALID_ID,
+                geom_id: sys::INVALID_ID,
+                inst_id: [sys::INVALID_ID],
+            },
+        };
+        let mut context = Self::context();
+        // SAFETY: the scene is committed; the structs have Embree's layout.
+        unsafe { sys::rtcIntersect1(self.scene.as_ptr(), &mut context, &mut rayhit) };
+        (rayhit.hit.geom_id != sys::INVALID_ID).then_some(RayHit {
+            t: rayhit.ray.tfar,
+            geometry: rayhit.hit.geom_id,
+            primitive: rayhit.hit.prim_id,
+            uv: [rayhit.hit.u, rayhit.hit.v],
+            ng: rayhit.hit.ng,
+        })
+    }
+
+    /// Whether anything lies along `org + t·dir` for `t` in (`tnear`, `tfar`).
+    #[inline]
+    pub fn occluded(&self, org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32, time: f32) -> bool {
+        let mut ray = sys::Ray { org, tnear, dir, time, tfar, mask: u32::MAX, id: 0, flags: 0 };
+        let mut context = Self::context();
+        // SAFETY: as in intersect.
+        unsafe { sys::rtcOccluded1(self.scene.as_ptr(), &mut context, &mut ray) };
+        ray.tfar == f32::NEG_INFINITY
+    }
+}
+
+/// Triangle vertices padded to 16 bytes' reach: Embree may load a whole
+/// SSE vector at the last vertex.
+fn pad(p: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    let mut v = Vec::with_capacity(p.len() + 1);
+    v.extend_from_slice(p);
+    v.push([0.0; 3]);
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn struct_layouts_match_embree_3() {
+        assert_eq!(std::mem::size_of::<sys::RayHit>(), 80);
+        assert_eq!(std::mem::size_of::<sys::Ray>(), 48);
+        let config = std::fs::read_to_string("/usr/include/embree3/rtcore_config.h").unwrap();
+        assert!(config.contains("#define RTC_MAX_INSTANCE_LEVEL_COUNT 1"));
+        assert!(config.contains("#define EMBREE_MIN_WIDTH 0"));
+    }
+
+    #[test]
+    fn a_moving_triangle_is_hit_where_it_is_at_the_ray_time() {
+        let at0 = [[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]];
+        let at1 = [[10.0, 0.0, 5.0], [11.0, 0.0, 5.0], [10.0, 1.0, 5.0]];
+        let indices = [[0u32, 1, 2]];
+        let bvh = Bvh::build(&[Primitives::Triangles { positions: vec![&at0, &at1], indices: &indices }]).unwrap();
+        let org = [0.2, 0.2, 0.0];
+        assert!(bvh.intersect(org, [0.0, 0.0, 1.0], 0.0, f32::INFINITY, 0.0).is_some_and(|h| (h.t - 5.0).abs() < 1e-5));
+        assert!(bvh.intersect(org, [0.0, 0.0, 1.0], 0.0, f32::INFINITY, 1.0).is_none());
+        assert!(bvh.occluded([10.2, 0.2, 0.0], [0.0, 0.0, 1.0], 0.0, 10.0, 1.0));
+        assert!(!bvh.occluded([10.2, 0.2, 0.0], [0.0, 0.0, 1.0], 0.0, 4.0, 1.0));
+    }
+}

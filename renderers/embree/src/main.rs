@@ -1,0 +1,112 @@
+//! `fbksd-embree <scene.pbrt>` serves a scene to `fbksd run` (the manager
+//! appends the scene file to the renderer command). Subcommands check,
+//! render, build references and measure speed.
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use fbksd_embree::{pbrt, reference, render};
+use std::path::{Path, PathBuf};
+
+/// The Embree path tracer.
+#[derive(Parser)]
+#[command(name = "fbksd-embree", version, args_conflicts_with_subcommands = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    /// Serve this scene to the manager (how `fbksd run` starts renderers).
+    scene: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Parse a scene; print its scene info.
+    Check { scene: PathBuf },
+    /// Render a scene's colour at N stratified samples per pixel (box
+    /// filter) to an EXR file, or an sRGB preview when OUT ends in .png.
+    Render {
+        scene: PathBuf,
+        #[arg(long, default_value_t = 64)]
+        spp: u64,
+        #[arg(long)]
+        out: PathBuf,
+        /// Threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Build the reference image of scene directories (their fbksd-scene.json says how).
+    Reference {
+        #[arg(required = true)]
+        scenes: Vec<PathBuf>,
+        /// Rebuild even when a reference exists.
+        #[arg(long)]
+        force: bool,
+        /// Override the metadata's spp (quick, unconverged references).
+        #[arg(long)]
+        spp: Option<u64>,
+    },
+    /// Samples and rays per second on one thread and on all cores.
+    Bench {
+        /// Scenes to time (scene files).
+        #[arg(required = true)]
+        scenes: Vec<PathBuf>,
+        /// Samples per pixel.
+        #[arg(long, default_value_t = 64)]
+        spp: u64,
+        /// Also write each image here (EXR), to compare with other renderers.
+        #[arg(long)]
+        out_dir: Option<PathBuf>,
+    },
+    /// Write a diffuse mesh scene as PLY files and scene.json for bench/mitsuba.py.
+    ExportMitsuba { scene: PathBuf, dir: PathBuf },
+}
+
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn load(path: &Path) -> anyhow::Result<fbksd_embree::scene::Scene> {
+    Ok(pbrt::load(path)?)
+}
+
+fn run() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match (cli.command, cli.scene) {
+        (None, Some(scene)) => fbksd_embree::serve(load(&scene)?)?,
+        (None, None) => anyhow::bail!("usage: fbksd-embree <scene.pbrt> (see --help)"),
+        (Some(Command::Check { scene }), _) => {
+            let scene = load(&scene)?;
+            for (k, v) in scene.info().iter() {
+                println!("{k} = {v}");
+            }
+        }
+        (Some(Command::Render { scene, spp, out, threads }), _) => {
+            let scene = load(&scene)?;
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build()?;
+            let image = pool.install(|| render::render_image(&scene, spp, 0));
+            if image.repairs > 0 {
+                eprintln!("warning: {} samples had non-finite values (replaced by 0)", image.repairs);
+            }
+            if out.extension().is_some_and(|e| e == "png") {
+                fbksd_manager::results::write_png_preview(&out, scene.width(), scene.height(), &image.rgb, 0.0)?;
+            } else {
+                fbksd_manager::results::write_exr(&out, scene.width(), scene.height(), &image.rgb)?;
+            }
+        }
+        (Some(Command::Reference { scenes, force, spp }), _) => {
+            for dir in scenes {
+                let meta = reference::SceneMeta::load(&dir)?;
+                let note =
+                    reference::build(&meta, force, spp).with_context(|| format!("reference of {}", meta.name))?;
+                println!("{}: {note}", meta.name);
+            }
+        }
+        (Some(Command::Bench { scenes, spp, out_dir }), _) => {
+            fbksd_embree::bench::run(&scenes, spp, out_dir.as_deref())?
+        }
+        (Some(Command::ExportMitsuba { scene, dir }), _) => fbksd_embree::bench::export_for_mitsuba(&scene, &dir)?,
+    }
+    Ok(())
+}

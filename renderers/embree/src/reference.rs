@@ -1,0 +1,102 @@
+//! Reference images of production scenes, built by
+//! `fbksd-embree reference <dir>` and cached beside the scene (not
+//! committed), with a `reference.json` convergence note.
+//!
+//! The reference is the box filter of `spp` stratified samples per pixel
+//! (the metadata's `render` method), rendered as two independent halves;
+//! the note gives the estimated RMS error of their mean, `rms(a − b) / 2`,
+//! beside the mean pixel value to read it against.
+
+use crate::render::render_image;
+use anyhow::{bail, Context};
+pub use fbksd_manager::scenes::{ReferenceMethod, SceneMeta};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// What `reference.json` records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ReferenceNote {
+    /// Samples per pixel used.
+    pub samples_per_pixel: u64,
+    /// Estimated RMS error of the reference.
+    pub estimated_error: f64,
+    /// Mean pixel value.
+    pub mean_value: f64,
+    /// Seconds it took.
+    pub seconds: f64,
+    /// Non-finite sample values replaced (should be 0).
+    pub repaired_samples: u64,
+    /// What made it; a reference made by another version is rebuilt.
+    pub generator: String,
+}
+
+/// Bumped whenever rendering changes what a converged image is.
+pub const RENDERER_VERSION: u32 = 1;
+
+fn generator() -> String {
+    format!("fbksd-embree {}, renderer {RENDERER_VERSION}", env!("CARGO_PKG_VERSION"))
+}
+
+impl std::fmt::Display for ReferenceNote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} spp, estimated RMS error {:.3e} (mean value {:.4}, {:.2}% of it), {:.1} s",
+            self.samples_per_pixel,
+            self.estimated_error,
+            self.mean_value,
+            100.0 * self.estimated_error / self.mean_value.max(1e-30),
+            self.seconds
+        )
+    }
+}
+
+/// Builds (or keeps) a scene's reference; returns its note.
+pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
+    let out = meta.reference_file();
+    let note_file = out.with_extension("json");
+    if !force && out.is_file() && note_file.is_file() {
+        let note: ReferenceNote = serde_json::from_slice(&std::fs::read(&note_file)?)?;
+        if note.generator == generator() && spp_override.is_none_or(|s| s == note.samples_per_pixel) {
+            return Ok(note);
+        }
+    }
+    let ReferenceMethod::Render { spp } = meta.reference else {
+        bail!("{}: the Embree renderer makes references by rendering (\"method\": \"render\")", meta.name);
+    };
+    let scene = crate::pbrt::load(&meta.scene_file()).with_context(|| format!("loading {}", meta.name))?;
+    if (scene.width(), scene.height()) != (meta.width, meta.height) {
+        bail!(
+            "{}: metadata says {}×{} but the scene file says {}×{}",
+            meta.name,
+            meta.width,
+            meta.height,
+            scene.width(),
+            scene.height()
+        );
+    }
+    let started = Instant::now();
+    let spp = spp_override.unwrap_or(spp).max(2);
+    let a = render_image(&scene, spp / 2, 1_000_001);
+    let b = render_image(&scene, spp - spp / 2, 1_000_002);
+    let w = (spp / 2) as f64 / spp as f64;
+    let image: Vec<f32> =
+        a.rgb.iter().zip(&b.rgb).map(|(a, b)| (*a as f64 * w + *b as f64 * (1.0 - w)) as f32).collect();
+    let rms =
+        (a.rgb.iter().zip(&b.rgb).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>() / a.rgb.len() as f64).sqrt();
+    let mean_value = image.iter().map(|v| *v as f64).sum::<f64>() / image.len() as f64;
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    fbksd_manager::results::write_exr(&out, scene.width(), scene.height(), &image)?;
+    let note = ReferenceNote {
+        samples_per_pixel: spp,
+        estimated_error: rms / 2.0,
+        mean_value,
+        seconds: started.elapsed().as_secs_f64(),
+        repaired_samples: a.repairs + b.repairs,
+        generator: generator(),
+    };
+    std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
+    Ok(note)
+}

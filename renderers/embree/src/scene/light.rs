@@ -1,0 +1,221 @@
+//! Lights: diffuse area lights on triangle meshes and spheres, and a
+//! constant environment. Each samples a point (or direction) as seen from
+//! a receiving point and reports the density in solid angle, for next-event
+//! estimation with multiple importance sampling.
+
+use crate::math::{vec3, Frame, Vec3};
+use crate::scene::shape::{triangle_area, Geometry};
+use std::f32::consts::PI;
+
+/// A light source.
+#[derive(Debug, Clone)]
+pub enum Light {
+    /// A diffuse emitter on a triangle mesh, sampled by area.
+    Mesh {
+        /// The shape that carries it.
+        shape: u32,
+        /// Cumulative triangle areas, normalised to end at 1.
+        cdf: Vec<f32>,
+        /// Total area.
+        area: f32,
+        /// Emitted radiance.
+        radiance: Vec3,
+        /// Emits on both sides.
+        two_sided: bool,
+    },
+    /// A diffuse emitter on a sphere, sampled by the cone it subtends.
+    Sphere {
+        /// The shape that carries it.
+        shape: u32,
+        /// Centre.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+        /// Emitted radiance.
+        radiance: Vec3,
+        /// Emits inwards too.
+        two_sided: bool,
+        /// Normals point inwards (emits inside only, unless two-sided).
+        flip: bool,
+    },
+    /// Constant radiance from every direction.
+    Environment {
+        /// The radiance.
+        radiance: Vec3,
+    },
+}
+
+/// A light sample seen from a receiving point.
+#[derive(Debug, Clone, Copy)]
+pub struct LightSample {
+    /// Unit direction from the receiver to the light.
+    pub wi: Vec3,
+    /// Distance to the light point (∞ for the environment).
+    pub distance: f32,
+    /// Radiance arriving along `-wi`.
+    pub radiance: Vec3,
+    /// Density in solid angle at the receiver (light selection excluded).
+    pub pdf: f32,
+}
+
+impl Light {
+    /// Emitted radiance leaving a point with normal `n` towards `w`.
+    #[inline]
+    pub fn emitted(&self, n: Vec3, w: Vec3) -> Vec3 {
+        match self {
+            Light::Mesh { radiance, two_sided, .. } | Light::Sphere { radiance, two_sided, .. } => {
+                if *two_sided || n.dot(w) > 0.0 {
+                    *radiance
+                } else {
+                    Vec3::ZERO
+                }
+            }
+            Light::Environment { radiance } => *radiance,
+        }
+    }
+
+    /// Power, for choosing among lights (`scene_radius` bounds the environment's).
+    pub fn power(&self, area: f32, scene_radius: f32) -> f32 {
+        match self {
+            Light::Mesh { radiance, two_sided, .. } | Light::Sphere { radiance, two_sided, .. } => {
+                radiance.average() * area * PI * if *two_sided { 2.0 } else { 1.0 }
+            }
+            Light::Environment { radiance } => radiance.average() * PI * PI * scene_radius * scene_radius * 4.0,
+        }
+    }
+
+    /// Samples the light from receiver `p` with `u` ∈ [0, 1)².
+    pub fn sample(&self, geometry: Option<&Geometry>, p: Vec3, u: [f32; 2]) -> Option<LightSample> {
+        match self {
+            Light::Environment { radiance } => {
+                let z = 1.0 - 2.0 * u[0];
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                let phi = 2.0 * PI * u[1];
+                let wi = vec3(r * phi.cos(), r * phi.sin(), z);
+                Some(LightSample { wi, distance: f32::INFINITY, radiance: *radiance, pdf: 1.0 / (4.0 * PI) })
+            }
+            Light::Mesh { cdf, area, .. } => {
+                let Some(Geometry::Mesh { positions, indices, flip, normals, .. }) = geometry else { return None };
+                // Pick a triangle by area, then reuse u[0] within it.
+                let k = cdf.partition_point(|c| *c <= u[0]).min(cdf.len() - 1);
+                let lo = if k == 0 { 0.0 } else { cdf[k - 1] };
+                let u0 = ((u[0] - lo) / (cdf[k] - lo)).clamp(0.0, 1.0 - f32::EPSILON);
+                let idx = indices[k];
+                let v = |i: usize| Vec3::from_array(positions[0][idx[i] as usize]);
+                let s = u0.sqrt();
+                let (b0, b1) = (1.0 - s, u[1] * s);
+                let point = v(0) * b0 + v(1) * b1 + v(2) * (1.0 - b0 - b1);
+                let mut n = (v(1) - v(0)).cross(v(2) - v(0)).normalize();
+                if let Some(normals) = normals {
+                    let i = |k: usize| normals[0][idx[k] as usize];
+                    n = n.face_forward(i(0) * b0 + i(1) * b1 + i(2) * (1.0 - b0 - b1));
+                } else if *flip {
+                    n = -n;
+                }
+                self.area_sample(p, point, n, 1.0 / area)
+            }
+            Light::Sphere { center, radius, .. } => {
+                let to_center = *center - p;
+                let dc2 = to_center.length_squared();
+                let r2 = radius * radius;
+                if dc2 <= r2 * 1.0001 {
+                    // Inside (or on) the sphere: sample by area.
+                    let z = 1.0 - 2.0 * u[0];
+                    let rr = (1.0 - z * z).max(0.0).sqrt();
+                    let phi = 2.0 * PI * u[1];
+                    let n = vec3(rr * phi.cos(), rr * phi.sin(), z);
+                    let area = 4.0 * PI * r2;
+                    return self.area_sample(p, *center + n * *radius, n, 1.0 / area);
+                }
+                // Outside: sample the cone of directions the sphere subtends.
+                let dc = dc2.sqrt();
+                let sin2_max = r2 / dc2;
+                let cos_max = (1.0 - sin2_max).max(0.0).sqrt();
+                let mut one_minus_cos_max = 1.0 - cos_max;
+                let mut cos_theta = (cos_max - 1.0) * u[0] + 1.0;
+                let mut sin2_theta = 1.0 - cos_theta * cos_theta;
+                if sin2_max < 0.000_685_23 {
+                    // Small cone: the series expansion keeps precision.
+                    sin2_theta = sin2_max * u[0];
+                    cos_theta = (1.0 - sin2_theta).sqrt();
+                    one_minus_cos_max = sin2_max / 2.0;
+                }
+                let frame = Frame::from_normal(to_center / dc);
+                let sin_theta = sin2_theta.max(0.0).sqrt();
+                let phi = 2.0 * PI * u[1];
+                let wi = frame.to_world(vec3(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta)).normalize();
+                // Distance to the near side of the sphere along wi.
+                let b = wi.dot(to_center);
+                let disc = (r2 - (dc2 - b * b)).max(0.0);
+                let distance = (b - disc.sqrt()).max(0.0);
+                let point = p + wi * distance;
+                let n = (point - *center).normalize();
+                let radiance = self.emitted(n, -wi);
+                let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
+                (pdf.is_finite() && distance > 0.0).then_some(LightSample { wi, distance, radiance, pdf })
+            }
+        }
+    }
+
+    fn area_sample(&self, p: Vec3, point: Vec3, n: Vec3, pdf_area: f32) -> Option<LightSample> {
+        let d = point - p;
+        let dist2 = d.length_squared();
+        let distance = dist2.sqrt();
+        if !(distance > 0.0) {
+            return None;
+        }
+        let wi = d / distance;
+        let cos = n.dot(wi).abs();
+        if cos == 0.0 {
+            return None;
+        }
+        let pdf = pdf_area * dist2 / cos;
+        let radiance = self.emitted(n, -wi);
+        (pdf.is_finite() && pdf > 0.0).then_some(LightSample { wi, distance, radiance, pdf })
+    }
+
+    /// The solid-angle density of [`Light::sample`] from `p` reaching the
+    /// light point `point` with normal `n` along `wi`.
+    pub fn pdf(&self, p: Vec3, wi: Vec3, point: Vec3, n: Vec3) -> f32 {
+        let area_pdf = |pdf_area: f32| {
+            let dist2 = (point - p).length_squared();
+            let cos = n.dot(wi).abs();
+            if cos == 0.0 {
+                0.0
+            } else {
+                pdf_area * dist2 / cos
+            }
+        };
+        match self {
+            Light::Environment { .. } => 1.0 / (4.0 * PI),
+            Light::Mesh { area, .. } => area_pdf(1.0 / area),
+            Light::Sphere { center, radius, .. } => {
+                let dc2 = (*center - p).length_squared();
+                let r2 = radius * radius;
+                if dc2 <= r2 * 1.0001 {
+                    return area_pdf(1.0 / (4.0 * PI * r2));
+                }
+                let sin2_max = r2 / dc2;
+                let one_minus_cos_max =
+                    if sin2_max < 0.000_685_23 { sin2_max / 2.0 } else { 1.0 - (1.0 - sin2_max).max(0.0).sqrt() };
+                1.0 / (2.0 * PI * one_minus_cos_max)
+            }
+        }
+    }
+}
+
+/// The normalised cumulative areas of a mesh's triangles.
+pub fn area_cdf(positions: &[[f32; 3]], indices: &[[u32; 3]]) -> (Vec<f32>, f32) {
+    let mut sum = 0f64;
+    let mut cdf: Vec<f64> = indices
+        .iter()
+        .map(|i| {
+            sum += triangle_area(positions, i) as f64;
+            sum
+        })
+        .collect();
+    for c in &mut cdf {
+        *c /= sum.max(f64::MIN_POSITIVE);
+    }
+    (cdf.into_iter().map(|c| c as f32).collect(), sum as f32)
+}
