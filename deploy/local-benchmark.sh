@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Builds FBKSD and runs a local benchmark end to end: references of the
-# experimental scenes (built once, then cached beside each scene), the Rust
+# experimental scenes and of the small production scenes (built once, then
+# cached beside each scene), the Rust
 # box filter on every scene at 1, 4 and 16 spp, metric values and error
 # maps, and the ranking. Results go to ./fbksd-results.
 set -euo pipefail
@@ -8,8 +9,9 @@ cd "$(dirname "$0")/.."
 cargo build --release --locked --workspace --bins
 bin=target/release
 "$bin/fbksd-procedural" reference scenes/experimental/*
+"$bin/fbksd-embree" reference scenes/production-small/*
 scenes=()
-for dir in scenes/experimental/*/; do
+for dir in scenes/experimental/*/ scenes/production-small/*/; do
     scenes+=(--scene "$dir")
 done
 status=0

@@ -105,3 +105,28 @@ fn a_missing_reference_says_how_to_build_it() {
     assert!(ok, "{err}");
     assert!(err.contains("no reference at") && err.contains("fbksd-procedural reference"), "{err}");
 }
+
+// Regression: the small production pool reused the full pool's scene names,
+// and results are filed by name, so a run could be scored against the
+// reference of the other size. Two scenes of one name are now an error.
+#[test]
+fn two_scenes_with_one_name_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    for sub in ["a", "b"] {
+        let d = dir.path().join(sub);
+        std::fs::create_dir(&d).unwrap();
+        scene_meta(&d, "twin", "twin.json", "analytic", &[1], 4, 4);
+    }
+    let results = dir.path().join("results");
+    std::fs::create_dir(&results).unwrap();
+    std::fs::write(results.join("index.json"), r#"{"runs": []}"#).unwrap();
+    let (ok, _, err) = fbksd(&[
+        "results",
+        "compute",
+        "--results",
+        results.to_str().unwrap(),
+        "--scenes",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("two scenes are named \"twin\""), "{err}");
+}

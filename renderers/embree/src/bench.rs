@@ -104,3 +104,42 @@ pub fn export_for_mitsuba(path: &Path, dir: &Path) -> anyhow::Result<()> {
     std::fs::write(dir.join("scene.json"), serde_json::to_vec_pretty(&json)?)?;
     Ok(())
 }
+
+/// How far two renderings of one scene agree beyond their noise: the
+/// per-channel means, and the largest relative difference of block means
+/// (blocks of `block × block` pixels average the noise away).
+pub fn compare(a: &Path, b: &Path, block: usize) -> anyhow::Result<String> {
+    let (wa, ha, pa) = fbksd_manager::results::read_exr(a)?;
+    let (wb, hb, pb) = fbksd_manager::results::read_exr(b)?;
+    anyhow::ensure!((wa, ha) == (wb, hb), "sizes differ: {wa}×{ha} and {wb}×{hb}");
+    let (w, h) = (wa as usize, ha as usize);
+    let mean = |p: &[f32], c: usize| p.iter().skip(c).step_by(3).map(|v| *v as f64).sum::<f64>() / (w * h) as f64;
+    let means: Vec<(f64, f64)> = (0..3).map(|c| (mean(&pa, c), mean(&pb, c))).collect();
+    let (bw, bh) = (w / block, h / block);
+    let block_mean = |p: &[f32], bx: usize, by: usize| {
+        let mut s = 0f64;
+        for y in by * block..(by + 1) * block {
+            for x in bx * block..(bx + 1) * block {
+                s += (p[(y * w + x) * 3] + p[(y * w + x) * 3 + 1] + p[(y * w + x) * 3 + 2]) as f64;
+            }
+        }
+        s / (block * block * 3) as f64
+    };
+    let (mut worst, mut sum) = (0f64, 0f64);
+    for by in 0..bh {
+        for bx in 0..bw {
+            let (x, y) = (block_mean(&pa, bx, by), block_mean(&pb, bx, by));
+            let d = (x - y).abs() / x.abs().max(y.abs()).max(1e-3);
+            worst = worst.max(d);
+            sum += d;
+        }
+    }
+    let channels: Vec<String> =
+        means.iter().map(|(x, y)| format!("{x:.4} vs {y:.4} ({:+.2}%)", 100.0 * (y - x) / x.abs().max(1e-9))).collect();
+    Ok(format!(
+        "channel means {}; {block}×{block} block means differ by {:.2}% on average, {:.2}% at most",
+        channels.join(", "),
+        100.0 * sum / (bw * bh) as f64,
+        100.0 * worst
+    ))
+}

@@ -56,8 +56,16 @@ enum Command {
         #[arg(long)]
         out_dir: Option<PathBuf>,
     },
-    /// Write a diffuse mesh scene as PLY files and scene.json for bench/mitsuba.py.
+    /// Write a diffuse mesh scene as PLY files and scene.json for bench/mitsuba_bench.py.
     ExportMitsuba { scene: PathBuf, dir: PathBuf },
+    /// How far two EXR renderings of one scene agree (means and block means).
+    Compare {
+        a: PathBuf,
+        b: PathBuf,
+        /// Block side in pixels.
+        #[arg(long, default_value_t = 16)]
+        block: usize,
+    },
 }
 
 fn main() {
@@ -107,6 +115,7 @@ fn run() -> anyhow::Result<()> {
             fbksd_embree::bench::run(&scenes, spp, out_dir.as_deref())?
         }
         (Some(Command::ExportMitsuba { scene, dir }), _) => fbksd_embree::bench::export_for_mitsuba(&scene, &dir)?,
+        (Some(Command::Compare { a, b, block }), _) => println!("{}", fbksd_embree::bench::compare(&a, &b, block)?),
     }
     Ok(())
 }

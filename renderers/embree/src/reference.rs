@@ -5,7 +5,8 @@
 //! The reference is the box filter of `spp` stratified samples per pixel
 //! (the metadata's `render` method), rendered as two independent halves;
 //! the note gives the estimated RMS error of their mean, `rms(a − b) / 2`,
-//! beside the mean pixel value to read it against.
+//! beside the mean pixel value to read it against. A cached reference is
+//! rebuilt when the renderer version, the spp or the scene's files change.
 
 use crate::render::render_image;
 use anyhow::{bail, Context};
@@ -28,6 +29,25 @@ pub struct ReferenceNote {
     pub repaired_samples: u64,
     /// What made it; a reference made by another version is rebuilt.
     pub generator: String,
+    /// A digest of the scene's files; a reference of other scene files is rebuilt.
+    #[serde(default)]
+    pub scene_digest: String,
+}
+
+/// A digest (FNV-1a, 64 bits) of every file beside the scene file but
+/// references, in name order: the scene as the renderer reads it.
+pub fn scene_digest(scene_file: &std::path::Path) -> anyhow::Result<String> {
+    let dir = scene_file.parent().unwrap_or(std::path::Path::new("."));
+    let mut files: Vec<_> = std::fs::read_dir(dir)?.map(|e| e.map(|e| e.path())).collect::<Result<_, _>>()?;
+    files.retain(|p| p.is_file() && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("reference")));
+    files.sort();
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for f in files {
+        for b in f.file_name().unwrap_or_default().as_encoded_bytes().iter().chain(&std::fs::read(&f)?) {
+            h = (h ^ *b as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    Ok(format!("{h:016x}"))
 }
 
 /// Bumped whenever rendering changes what a converged image is.
@@ -55,15 +75,17 @@ impl std::fmt::Display for ReferenceNote {
 pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
     let note_file = out.with_extension("json");
-    if !force && out.is_file() && note_file.is_file() {
-        let note: ReferenceNote = serde_json::from_slice(&std::fs::read(&note_file)?)?;
-        if note.generator == generator() && spp_override.is_none_or(|s| s == note.samples_per_pixel) {
-            return Ok(note);
-        }
-    }
     let ReferenceMethod::Render { spp } = meta.reference else {
         bail!("{}: the Embree renderer makes references by rendering (\"method\": \"render\")", meta.name);
     };
+    let spp = spp_override.unwrap_or(spp).max(2);
+    let digest = scene_digest(&meta.scene_file())?;
+    if !force && out.is_file() && note_file.is_file() {
+        let note: ReferenceNote = serde_json::from_slice(&std::fs::read(&note_file)?)?;
+        if note.generator == generator() && note.samples_per_pixel == spp && note.scene_digest == digest {
+            return Ok(note);
+        }
+    }
     let scene = crate::pbrt::load(&meta.scene_file()).with_context(|| format!("loading {}", meta.name))?;
     if (scene.width(), scene.height()) != (meta.width, meta.height) {
         bail!(
@@ -76,7 +98,6 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         );
     }
     let started = Instant::now();
-    let spp = spp_override.unwrap_or(spp).max(2);
     let a = render_image(&scene, spp / 2, 1_000_001);
     let b = render_image(&scene, spp - spp / 2, 1_000_002);
     let w = (spp / 2) as f64 / spp as f64;
@@ -96,6 +117,7 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         seconds: started.elapsed().as_secs_f64(),
         repaired_samples: a.repairs + b.repairs,
         generator: generator(),
+        scene_digest: digest,
     };
     std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
     Ok(note)

@@ -118,6 +118,9 @@ pub enum Place {
 /// Draws positions for a run of places, caching per-pixel state.
 struct Drawer<'a> {
     sampler: &'a Sampler,
+    /// Parameters to draw: those the scene uses or the layout outputs.
+    /// Each parameter's value does not depend on which others are drawn.
+    needed: u8,
     strata: Strata,
     pixel: Option<PixelSeed>,
 }
@@ -134,8 +137,7 @@ impl Drawer<'_> {
                     self.pixel = Some(self.sampler.pixel(x, y, &self.strata));
                 }
                 let pixel = self.pixel.as_ref().expect("set above");
-                // All seven are drawn, so a sample does not depend on the layout.
-                (self.sampler.pixel_sample(pixel, &self.strata, s, 0x7F), Dimensions::of_pixel_sample(pixel, s))
+                (self.sampler.pixel_sample(pixel, &self.strata, s, self.needed), Dimensions::of_pixel_sample(pixel, s))
             }
             Place::Free { index } => (self.sampler.free_sample(index), Dimensions::of_free_sample(self.sampler, index)),
         }
@@ -174,7 +176,11 @@ pub fn fill(
     repairs: &Repairs,
 ) -> u64 {
     let size = layout.sample_size();
-    let mut drawer = Drawer { sampler, strata: Strata::new(1), pixel: None };
+    let outputs = layout.elements().iter().fold(0u8, |mask, (e, io)| match e {
+        Element::Parameter(p) if *io == ElementIo::Output => mask | 1 << p.index(),
+        _ => mask,
+    });
+    let mut drawer = Drawer { sampler, needed: scene.used_parameters() | outputs, strata: Strata::new(1), pixel: None };
     let mut rays = 0u64;
     for (sample, place) in samples.chunks_exact_mut(size).zip(places) {
         let (mut p, dims) = drawer.draw(place);
@@ -254,6 +260,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Rendered {
     let (w, h) = (scene.width() as usize, scene.height() as usize);
     let sampler = Sampler::new(scene.width(), scene.height(), request);
     let wanted = Wanted::default();
+    let needed = scene.used_parameters();
     let repairs = Repairs::default();
     let rays = AtomicU64::new(0);
     let mut rgb = vec![0f32; w * h * 3];
@@ -264,7 +271,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Rendered {
             let pixel = sampler.pixel(x as u32, y as u32, &strata);
             let mut sum = [0f64; 3];
             for s in 0..spp {
-                let p = sampler.pixel_sample(&pixel, &strata, s, 0x7F);
+                let p = sampler.pixel_sample(&pixel, &strata, s, needed);
                 let v = trace(scene, &position(&p), &Dimensions::of_pixel_sample(&pixel, s), &wanted);
                 row_rays += v.rays as u64;
                 if v.repaired {

@@ -55,6 +55,13 @@ pub fn find_scenes(roots: &[PathBuf]) -> io::Result<BTreeMap<String, SceneMeta>>
     fn walk(dir: &Path, depth: usize, out: &mut BTreeMap<String, SceneMeta>) -> io::Result<()> {
         if dir.join(META_FILE).is_file() {
             let meta = SceneMeta::load(dir).map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e.to_string()))?;
+            if let Some(other) = out.get(&path_safe_name(&meta.name)) {
+                // Results are filed by scene name: two scenes of one name would share a reference.
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    format!("two scenes are named {:?}: {} and {}", meta.name, other.dir.display(), meta.dir.display()),
+                ));
+            }
             out.insert(path_safe_name(&meta.name), meta);
             return Ok(());
         }

@@ -176,6 +176,23 @@ impl Scene {
         self.light_pmf[i as usize]
     }
 
+    /// The random parameters the scene depends on, as a bit mask by
+    /// [`fbksd_core::RandomParameter::index`]: the image always, the lens
+    /// with depth of field, time with motion, the light pair with lights.
+    pub fn used_parameters(&self) -> u8 {
+        let mut mask = 0b11;
+        if self.camera.has_dof() {
+            mask |= 0b1100;
+        }
+        if self.has_motion {
+            mask |= 0b1_0000;
+        }
+        if !self.lights.is_empty() {
+            mask |= 0b110_0000;
+        }
+        mask
+    }
+
     /// The scene info sent to techniques.
     pub fn info(&self) -> SceneInfo {
         let mut used = vec!["IMAGE_X", "IMAGE_Y"];
