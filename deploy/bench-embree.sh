@@ -13,7 +13,7 @@ if ! dpkg-query -W -f='${Status}' libllvm19 2>/dev/null | grep -q "install ok in
 fi
 python3 -c "import mitsuba" 2>/dev/null || python3 -m pip install --quiet mitsuba \
     || python3 -m pip install --quiet --break-system-packages mitsuba
-cargo build --release --locked -p fbksd-embree -p fbksd-cli
+cargo build --release --locked -p fbksd-embree -p fbksd
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cornell=scenes/production/cornell-box/scene.pbrt
@@ -24,6 +24,7 @@ python3 renderers/embree/bench/mitsuba_bench.py "$out/mitsuba-scene" 64 "$out/mi
 echo "== Hair, 512×512, 16 spp =="
 ./target/release/fbksd-embree bench scenes/production/hair/scene.pbrt --spp 16
 echo "== Agreement of the two Cornell images (each 64 spp) =="
-for metric in relmse psnr; do
+./target/release/fbksd-embree compare "$out/mitsuba.exr" "$out/ours/cornell-box.exr"
+for metric in rMSE PSNR; do
     echo "$metric: $(./target/release/fbksd iqa "$metric" "$out/mitsuba.exr" "$out/ours/cornell-box.exr")"
 done

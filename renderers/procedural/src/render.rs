@@ -2,13 +2,9 @@
 //! batches of 64, writing the layout's elements.
 //!
 //! Sample positions the technique does not give (no INPUT parameters) are
-//! drawn here, stratified per pixel and seeded from (pixel, request, sample
-//! index, dimension), so a run is reproducible: the pairs IMAGE_X/IMAGE_Y,
-//! LENS_U/LENS_V and LIGHT_X/LIGHT_Y are multi-jittered on a ⌈√spp⌉² grid
-//! (uniform in 2-D for any spp; for square spp one sample per cell and per
-//! 1-D interval), TIME in `spp` strata; each pair goes through its own
-//! per-pixel permutation so dimensions are not correlated. Free samples (count requests) are
-//! uniform over the image.
+//! drawn by [`fbksd_renderer::sampler`], stratified per pixel and seeded
+//! from (pixel, request, sample index, dimension), so a run is
+//! reproducible. Free samples (count requests) are uniform over the image.
 
 use crate::program::{Machine, Program, LANES};
 use crate::scene::Scene;

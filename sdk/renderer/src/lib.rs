@@ -10,6 +10,9 @@
 //! [`SampleBuffer`] per sample; `set_param` writes OUTPUT random parameters
 //! and returns the technique's value for INPUT ones.
 //!
+//! [`sampler`] draws reproducible, stratified sample positions for
+//! renderers that have no sampler of their own.
+//!
 //! The evaluate callback runs on its own thread and may use any number of
 //! threads; pipes may be created and filled concurrently. The contract: a
 //! request is complete when pipes covering exactly `spp` samples of every
