@@ -99,7 +99,8 @@ pub fn export_for_mitsuba(path: &Path, dir: &Path) -> anyhow::Result<()> {
     let fov = 2.0 * c.tan_half_fov.atan().to_degrees();
     let json = serde_json::json!({
         "width": c.width, "height": c.height, "fov": fov, "max_depth": scene.max_depth,
-        "camera_to_world": c.camera_to_world.m, "shapes": shapes,
+        "camera_to_world": [c.camera_to_world.rows[0], c.camera_to_world.rows[1], c.camera_to_world.rows[2], [0.0, 0.0, 0.0, 1.0]],
+        "shapes": shapes,
     });
     std::fs::write(dir.join("scene.json"), serde_json::to_vec_pretty(&json)?)?;
     Ok(())

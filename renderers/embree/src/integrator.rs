@@ -25,14 +25,17 @@
 use crate::bsdf::Bsdf;
 use crate::math::{Frame, Vec3};
 use crate::scene::camera::Ray;
-use crate::scene::light::Light;
 use crate::scene::shape::SurfaceHit;
 use crate::scene::Scene;
 use fbksd_renderer::sampler::Dimensions;
 
-/// Which features to compute (COLOR always is).
+/// Which features to compute.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Wanted {
+    /// COLOR or DIFFUSE_COLOR: the path's radiance. Without it, paths stop
+    /// as soon as the geometry features are known and no light is sampled
+    /// beyond DIRECT_LIGHT.
+    pub radiance: bool,
     /// DIRECT_LIGHT.
     pub direct: bool,
     /// DEPTH, WORLD/NORMAL/TEXTURE_COLOR (either number), or any `_NS` feature.
@@ -174,7 +177,7 @@ pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) 
         let wo_local = frame.to_local(wo);
         let base = depth * DIMS_PER_BOUNCE;
         // Next-event estimation.
-        if !bsdf.is_delta() {
+        if !bsdf.is_delta() && (wanted.radiance || (depth == 0 && wanted.direct)) {
             let u_light = if depth == 0 { pos.light } else { [dims.get(base + 1), dims.get(base + 2)] };
             let lc = sample_light(
                 scene,
@@ -203,7 +206,6 @@ pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) 
                 diffuse += contribution * diffuse_share;
             }
         } else if depth == 0 && wanted.direct {
-            // A specular first hit still receives direct light.
             // A specular first hit still receives direct light: measured as a white Lambertian would.
             let lambert = Bsdf::Diffuse(crate::bsdf::diffuse::Diffuse { reflectance: Vec3::ONE });
             let up = Vec3 { x: 0.0, y: 0.0, z: 1.0 };
@@ -211,6 +213,10 @@ pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) 
             out.direct =
                 sample_light(scene, &hit, &lambert, &frame, up, dims.get(base), pos.light, ray.time, true, &mut rays)
                     .incident;
+        }
+        // Without radiance, the path is done once the features are.
+        if !wanted.radiance && (!wanted.geometry || (depth >= 1 && found_non_specular)) {
+            break;
         }
         // Continue the path by sampling the BSDF.
         let Some(s) = bsdf.sample(wo_local, dims.get(base + 3), [dims.get(base + 4), dims.get(base + 5)]) else {
@@ -317,11 +323,7 @@ fn sample_light(
     let none = LightContribution::default();
     let Some((li, choose_pdf)) = scene.choose_light(u_choose) else { return none };
     let light = &scene.lights[li as usize];
-    let geometry = match light {
-        Light::Mesh { shape, .. } | Light::Sphere { shape, .. } => Some(&scene.shapes[*shape as usize].geometry),
-        Light::Environment { .. } => None,
-    };
-    let Some(ls) = light.sample(geometry, hit.p, u) else { return none };
+    let Some(ls) = light.sample(hit.p, u) else { return none };
     if ls.radiance.is_black() || ls.pdf <= 0.0 {
         return none;
     }

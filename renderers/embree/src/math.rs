@@ -395,6 +395,33 @@ impl Transform {
     }
 }
 
+/// An affine transform in `f32`, for hot paths (the camera): the top three
+/// rows of a [`Transform`]'s matrix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Affine {
+    /// Rows of the 3 × 4 matrix.
+    pub rows: [[f32; 4]; 3],
+}
+
+impl Affine {
+    /// From a transform whose last row is (0, 0, 0, 1).
+    pub fn new(t: &Transform) -> Affine {
+        Affine { rows: std::array::from_fn(|i| std::array::from_fn(|j| t.m[i][j] as f32)) }
+    }
+    /// Applies to a point.
+    #[inline(always)]
+    pub fn point(&self, p: Vec3) -> Vec3 {
+        let r = |i: usize| self.rows[i][0] * p.x + self.rows[i][1] * p.y + self.rows[i][2] * p.z + self.rows[i][3];
+        vec3(r(0), r(1), r(2))
+    }
+    /// Applies to a direction.
+    #[inline(always)]
+    pub fn vector(&self, v: Vec3) -> Vec3 {
+        let r = |i: usize| self.rows[i][0] * v.x + self.rows[i][1] * v.y + self.rows[i][2] * v.z;
+        vec3(r(0), r(1), r(2))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -45,9 +45,12 @@ impl Bindings {
                 Element::Parameter(p) => Some(Source::Parameter(p.index())),
                 Element::Feature(f, n) => {
                     match f {
-                        ColorR | ColorG | ColorB => {}
+                        ColorR | ColorG | ColorB => wanted.radiance = true,
                         DirectLightR | DirectLightG | DirectLightB => wanted.direct = true,
-                        DiffuseColorR | DiffuseColorG | DiffuseColorB => wanted.diffuse = true,
+                        DiffuseColorR | DiffuseColorG | DiffuseColorB => {
+                            wanted.radiance = true;
+                            wanted.diffuse = true;
+                        }
                         _ => wanted.geometry = true,
                     }
                     Some(Source::Feature(*f, *n))
@@ -259,7 +262,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Rendered {
     use rayon::prelude::*;
     let (w, h) = (scene.width() as usize, scene.height() as usize);
     let sampler = Sampler::new(scene.width(), scene.height(), request);
-    let wanted = Wanted::default();
+    let wanted = Wanted { radiance: true, ..Wanted::default() };
     let needed = scene.used_parameters();
     let repairs = Repairs::default();
     let rays = AtomicU64::new(0);

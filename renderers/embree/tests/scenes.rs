@@ -300,3 +300,23 @@ fn every_sample_is_finite_at_the_numerical_extremes() {
         assert!(color > 0.0, "{name}: the scene rendered black");
     }
 }
+
+#[test]
+fn features_without_colour_are_the_same_features_at_a_fraction_of_the_rays() {
+    let scene = lit_scene();
+    let geometry = ["WORLD_X", "NORMAL_Y", "TEXTURE_COLOR_R_NS", "DEPTH", "DIRECT_LIGHT_G"];
+    let (alone, _) = samples(&scene, &layout(&geometry), 4, 0);
+    let mut with_colour: Vec<&str> = geometry.to_vec();
+    with_colour.push("COLOR_R");
+    let (full, _) = samples(&scene, &layout(&with_colour), 4, 0);
+    let stripped: Vec<f32> = full.chunks_exact(6).flat_map(|s| s[..5].to_vec()).collect();
+    assert_eq!(alone, stripped, "the features do not depend on whether colour is asked for");
+    // In a closed room every path is long: features alone take two rays per sample.
+    let cornell =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/production/cornell-box/small.pbrt");
+    let cornell = fbksd_embree::pbrt::load(&cornell).unwrap();
+    let features = layout(&["WORLD_X", "NORMAL_Y", "TEXTURE_COLOR_R_NS", "DEPTH"]);
+    let few = common::rays(&cornell, &features, 1);
+    let many = common::rays(&cornell, &layout(&["WORLD_X", "NORMAL_Y", "TEXTURE_COLOR_R_NS", "DEPTH", "COLOR_R"]), 1);
+    assert!(few * 2 < many, "{few} rays for features alone, {many} with colour");
+}

@@ -5,7 +5,7 @@ use super::params::{ParamSet, SpectrumValue, Values};
 use super::{ply, Loc, SceneError};
 use crate::math::{Transform, Vec3};
 use crate::scene::camera::Camera;
-use crate::scene::light::{area_cdf, Light};
+use crate::scene::light::{area_cdf, Light, LightTriangle};
 use crate::scene::material::{ConductorIndex, Material, Roughness};
 use crate::scene::shape::{Geometry, Shape};
 use crate::scene::texture::{read_image, Encoding, Texture, UvMapping, Wrap};
@@ -854,9 +854,11 @@ impl Parser {
                 return Err(SceneError::at(loc, "a moving area light is not supported"));
             }
             let l = match &geometry {
-                Geometry::Mesh { positions, indices, .. } => {
+                Geometry::Mesh { positions, indices, normals, flip, .. } => {
                     let (cdf, area) = area_cdf(&positions[0], indices);
-                    Light::Mesh { shape: shape_index, cdf, area, radiance: *radiance, two_sided: *two_sided }
+                    let normals = normals.as_ref().map(|n| n[0].as_slice());
+                    let triangles = LightTriangle::of_mesh(&positions[0], indices, normals, *flip);
+                    Light::Mesh { shape: shape_index, triangles, cdf, area, radiance: *radiance, two_sided: *two_sided }
                 }
                 Geometry::Sphere { steps, flip, .. } => {
                     let s = steps[0];
@@ -934,7 +936,7 @@ impl Parser {
         }
         p.check_unused()?;
         let camera = Camera {
-            camera_to_world,
+            camera_to_world: crate::math::Affine::new(&camera_to_world),
             width,
             height,
             tan_half_fov: (fov.to_radians() / 2.0).tan(),

@@ -1,13 +1,13 @@
 //! The perspective camera of pbrt-v4: field of view on the shorter image
 //! axis, a thin lens (depth of field) and a shutter interval.
 
-use crate::math::{vec3, Transform, Vec3};
+use crate::math::{vec3, Affine, Vec3};
 
 /// A perspective camera with a thin lens.
 #[derive(Debug, Clone)]
 pub struct Camera {
-    /// Camera space → world.
-    pub camera_to_world: Transform,
+    /// Camera space → world (pbrt's camera transform has no projective part).
+    pub camera_to_world: Affine,
     /// Image size in pixels.
     pub width: u32,
     /// Image height.

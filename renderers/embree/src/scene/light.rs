@@ -4,7 +4,7 @@
 //! estimation with multiple importance sampling.
 
 use crate::math::{vec3, Frame, Vec3};
-use crate::scene::shape::{triangle_area, Geometry};
+use crate::scene::shape::triangle_area;
 use std::f32::consts::PI;
 
 /// A light source.
@@ -14,6 +14,8 @@ pub enum Light {
     Mesh {
         /// The shape that carries it.
         shape: u32,
+        /// Its triangles, ready for sampling.
+        triangles: Vec<LightTriangle>,
         /// Cumulative triangle areas, normalised to end at 1.
         cdf: Vec<f32>,
         /// Total area.
@@ -43,6 +45,46 @@ pub enum Light {
         /// The radiance.
         radiance: Vec3,
     },
+}
+
+/// A triangle of a mesh light: a vertex, two edges and the emitting side's unit normal.
+#[derive(Debug, Clone, Copy)]
+pub struct LightTriangle {
+    /// First vertex.
+    pub p0: Vec3,
+    /// Second vertex − first.
+    pub e1: Vec3,
+    /// Third vertex − first.
+    pub e2: Vec3,
+    /// Unit normal, oriented as pbrt orients the surface.
+    pub n: Vec3,
+}
+
+impl LightTriangle {
+    /// The triangles of a static mesh: normals follow the vertex normals
+    /// when the mesh has them (their sum per triangle), else the winding,
+    /// flipped when `flip`.
+    pub fn of_mesh(
+        positions: &[[f32; 3]],
+        indices: &[[u32; 3]],
+        normals: Option<&[Vec3]>,
+        flip: bool,
+    ) -> Vec<LightTriangle> {
+        indices
+            .iter()
+            .map(|idx| {
+                let v = |k: usize| Vec3::from_array(positions[idx[k] as usize]);
+                let (p0, e1, e2) = (v(0), v(1) - v(0), v(2) - v(0));
+                let mut n = e1.cross(e2).normalize();
+                match normals {
+                    Some(ns) => n = n.face_forward(ns[idx[0] as usize] + ns[idx[1] as usize] + ns[idx[2] as usize]),
+                    None if flip => n = -n,
+                    None => {}
+                }
+                LightTriangle { p0, e1, e2, n }
+            })
+            .collect()
+    }
 }
 
 /// A light sample seen from a receiving point.
@@ -85,7 +127,8 @@ impl Light {
     }
 
     /// Samples the light from receiver `p` with `u` ∈ [0, 1)².
-    pub fn sample(&self, geometry: Option<&Geometry>, p: Vec3, u: [f32; 2]) -> Option<LightSample> {
+    #[inline]
+    pub fn sample(&self, p: Vec3, u: [f32; 2]) -> Option<LightSample> {
         match self {
             Light::Environment { radiance } => {
                 let z = 1.0 - 2.0 * u[0];
@@ -94,25 +137,16 @@ impl Light {
                 let wi = vec3(r * phi.cos(), r * phi.sin(), z);
                 Some(LightSample { wi, distance: f32::INFINITY, radiance: *radiance, pdf: 1.0 / (4.0 * PI) })
             }
-            Light::Mesh { cdf, area, .. } => {
-                let Some(Geometry::Mesh { positions, indices, flip, normals, .. }) = geometry else { return None };
+            Light::Mesh { triangles, cdf, area, .. } => {
                 // Pick a triangle by area, then reuse u[0] within it.
-                let k = cdf.partition_point(|c| *c <= u[0]).min(cdf.len() - 1);
+                let k = if cdf.len() == 1 { 0 } else { cdf.partition_point(|c| *c <= u[0]).min(cdf.len() - 1) };
                 let lo = if k == 0 { 0.0 } else { cdf[k - 1] };
                 let u0 = ((u[0] - lo) / (cdf[k] - lo)).clamp(0.0, 1.0 - f32::EPSILON);
-                let idx = indices[k];
-                let v = |i: usize| Vec3::from_array(positions[0][idx[i] as usize]);
+                let t = &triangles[k];
                 let s = u0.sqrt();
-                let (b0, b1) = (1.0 - s, u[1] * s);
-                let point = v(0) * b0 + v(1) * b1 + v(2) * (1.0 - b0 - b1);
-                let mut n = (v(1) - v(0)).cross(v(2) - v(0)).normalize();
-                if let Some(normals) = normals {
-                    let i = |k: usize| normals[0][idx[k] as usize];
-                    n = n.face_forward(i(0) * b0 + i(1) * b1 + i(2) * (1.0 - b0 - b1));
-                } else if *flip {
-                    n = -n;
-                }
-                self.area_sample(p, point, n, 1.0 / area)
+                // Barycentrics (1 − √u₀, u₁√u₀, (1 − u₁)√u₀): uniform over the triangle.
+                let point = t.p0 + t.e1 * (u[1] * s) + t.e2 * ((1.0 - u[1]) * s);
+                self.area_sample(p, point, t.n, 1.0 / area)
             }
             Light::Sphere { center, radius, .. } => {
                 let to_center = *center - p;
@@ -218,4 +252,81 @@ pub fn area_cdf(positions: &[[f32; 3]], indices: &[[u32; 3]]) -> (Vec<f32>, f32)
         *c /= sum.max(f64::MIN_POSITIVE);
     }
     (cdf.into_iter().map(|c| c as f32).collect(), sum as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The mean of `f` over a stratified grid of `n × n` points of [0, 1)².
+    fn mean_over_square(n: usize, mut f: impl FnMut([f32; 2]) -> f64) -> f64 {
+        let mut sum = 0.0;
+        for i in 0..n {
+            for j in 0..n {
+                sum += f([(i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32]);
+            }
+        }
+        sum / (n * n) as f64
+    }
+
+    /// Irradiance E at `p` (normal `n`) from light samples, and the check that
+    /// [`Light::pdf`] agrees with each sample's density.
+    fn estimate_irradiance(light: &Light, p: Vec3, n: Vec3, point_of: impl Fn(&LightSample) -> (Vec3, Vec3)) -> f64 {
+        mean_over_square(400, |u| {
+            let Some(s) = light.sample(p, u) else { return 0.0 };
+            let (point, normal) = point_of(&s);
+            let pdf = light.pdf(p, s.wi, point, normal);
+            assert!((pdf - s.pdf).abs() <= 1e-3 * s.pdf, "pdf {pdf} vs sampled {}", s.pdf);
+            (s.radiance.x * s.wi.dot(n).max(0.0) / s.pdf) as f64
+        })
+    }
+
+    #[test]
+    fn a_quad_light_gives_lamberts_irradiance() {
+        // A unit square at height 1 facing down, seen from the origin facing up.
+        let positions = [[-0.5, 1.0, -0.5], [0.5, 1.0, -0.5], [0.5, 1.0, 0.5], [-0.5, 1.0, 0.5]];
+        let indices = [[0, 1, 2], [0, 2, 3]];
+        let (cdf, area) = area_cdf(&positions, &indices);
+        let triangles = LightTriangle::of_mesh(&positions, &indices, None, false);
+        assert!(triangles.iter().all(|t| t.n.y == -1.0), "the winding faces down");
+        let light = Light::Mesh { shape: 0, triangles, cdf, area, radiance: Vec3::ONE, two_sided: false };
+        let (p, n) = (Vec3::ZERO, vec3(0.0, 1.0, 0.0));
+        let e = estimate_irradiance(&light, p, n, |s| (p + s.wi * s.distance, vec3(0.0, -1.0, 0.0)));
+        // Lambert: E = L/2 Σ βᵢ n·(Rᵢ × Rᵢ₊₁)/|Rᵢ × Rᵢ₊₁| over the polygon's edges.
+        let r: Vec<Vec3> = positions.iter().map(|v| Vec3::from_array(*v).normalize()).collect();
+        let exact: f64 = (0..4)
+            .map(|i| {
+                let (a, b) = (r[i], r[(i + 1) % 4]);
+                (a.dot(b).acos() * a.cross(b).normalize().dot(n).abs() / 2.0) as f64
+            })
+            .sum();
+        assert!((e - exact).abs() < 2e-3 * exact, "estimated {e}, Lambert {exact}");
+    }
+
+    #[test]
+    fn a_sphere_light_gives_its_closed_form_irradiance_outside_and_inside() {
+        let light = Light::Sphere {
+            shape: 0,
+            center: vec3(0.0, 3.0, 1.0),
+            radius: 0.8,
+            radiance: Vec3::ONE,
+            two_sided: true,
+            flip: false,
+        };
+        let center = vec3(0.0, 3.0, 1.0);
+        let normal_at = |s: &LightSample, p: Vec3| {
+            let point = p + s.wi * s.distance;
+            (point, (point - center).normalize())
+        };
+        let (p, n) = (Vec3::ZERO, vec3(0.0, 1.0, 0.0));
+        let e = estimate_irradiance(&light, p, n, |s| normal_at(s, p));
+        // E = π L sin²α cos θ for a sphere wholly above the horizon.
+        let d = center.length();
+        let exact = (PI * (0.8 / d) * (0.8 / d) * (center.y / d)) as f64;
+        assert!((e - exact).abs() < 2e-3 * exact, "estimated {e}, exact {exact}");
+        // Inside a two-sided emitting sphere, the radiance arrives from everywhere: E = π L.
+        let inside = center + vec3(0.1, -0.2, 0.3);
+        let e = estimate_irradiance(&light, inside, n, |s| normal_at(s, inside));
+        assert!((e - PI as f64).abs() < 0.02 * PI as f64, "inside: {e}");
+    }
 }

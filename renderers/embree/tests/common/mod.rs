@@ -52,6 +52,15 @@ pub fn samples(scene: &Scene, layout: &CompiledLayout, spp: u64, request: u64) -
     (out, repairs.count())
 }
 
+/// Rays traced to evaluate every sample of request 0 at `spp`.
+pub fn rays(scene: &Scene, layout: &CompiledLayout, spp: u64) -> u64 {
+    let (w, h) = (scene.width(), scene.height());
+    let mut out = vec![0f32; (w * h) as usize * spp as usize * layout.sample_size()];
+    let places =
+        (0..h).flat_map(move |y| (0..w).flat_map(move |x| (0..spp).map(move |s| Place::Pixel { x, y, s, spp })));
+    fill(scene, &Bindings::new(layout), layout, &Sampler::new(w, h, 0), &mut out, places, &Repairs::default())
+}
+
 /// Pixel means of element `e` (offset in the layout).
 pub fn pixel_means(scene: &Scene, data: &[f32], layout: &CompiledLayout, spp: u64, e: usize) -> Vec<f64> {
     let size = layout.sample_size();
