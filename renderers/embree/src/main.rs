@@ -32,6 +32,9 @@ enum Command {
         /// Threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Request number: another number draws other samples.
+        #[arg(long, default_value_t = 0)]
+        request: u64,
     },
     /// Build the reference image of scene directories (their fbksd-scene.json says how).
     Reference {
@@ -90,10 +93,10 @@ fn run() -> anyhow::Result<()> {
                 println!("{k} = {v}");
             }
         }
-        (Some(Command::Render { scene, spp, out, threads }), _) => {
+        (Some(Command::Render { scene, spp, out, threads, request }), _) => {
             let scene = load(&scene)?;
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build()?;
-            let image = pool.install(|| render::render_image(&scene, spp, 0));
+            let image = pool.install(|| render::render_image(&scene, spp, request));
             if image.repairs > 0 {
                 eprintln!("warning: {} samples had non-finite values (replaced by 0)", image.repairs);
             }

@@ -241,4 +241,4 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
 }
 
 /// Bumped whenever sample positions change, so cached references are rebuilt.
-pub const SAMPLER_VERSION: u32 = 2;
+pub const SAMPLER_VERSION: u32 = 3;

@@ -57,12 +57,39 @@ impl Divisor {
     }
 }
 
-/// Small primes for the per-dimension permutations `s ↦ (a·s + b) mod n`.
-const PRIMES: [u64; 12] = [7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47];
-
-/// A multiplier coprime with `n`, different per dimension.
-fn coprime(n: u64, dimension: usize) -> u64 {
-    (0..PRIMES.len()).map(|k| PRIMES[(dimension * 3 + k) % PRIMES.len()]).find(|p| n % p != 0).unwrap_or(1)
+/// A keyed pseudo-random permutation of `0..n`: `i ↦ permute(i, n, key)`
+/// is a bijection of `0..n` for every key, and different keys give
+/// unrelated permutations.
+///
+/// Three rounds of steps each invertible on the smallest power-of-two range
+/// holding `n` (xor and add of a round key, multiplication by an odd
+/// number, xor with a right shift), each round keyed by its own hash of the
+/// key (also in the multiplier, so keys do not merely relabel one
+/// permutation); repeated until the value falls below `n` (cycle walking:
+/// the orbit of `i` returns below `n`, in under two passes on average).
+#[inline]
+pub fn permute(i: u64, n: u64, key: u64) -> u64 {
+    if n <= 1 {
+        return 0;
+    }
+    let bits = 64 - (n - 1).leading_zeros();
+    let mask = u64::MAX >> (64 - bits);
+    let (s1, s2) = ((bits / 2).max(1), (bits / 3).max(1));
+    let keys = [mix(key), mix(key ^ 0x5851_F42D_4C95_7F2D), mix(key ^ 0x1405_7B7E_F767_814F)];
+    let mut v = i & mask;
+    loop {
+        for k in keys {
+            v = (v ^ k) & mask;
+            v = v.wrapping_mul((k >> 21) | 1) & mask;
+            v ^= v >> s1;
+            v = v.wrapping_add(k >> 43) & mask;
+            v = v.wrapping_mul(0x6935_FA69_0929_EB3F) & mask;
+            v ^= v >> s2;
+        }
+        if v < n {
+            return v;
+        }
+    }
 }
 
 /// Draws the random parameters of samples.
@@ -73,23 +100,15 @@ pub struct Sampler {
     request: u64,
 }
 
-/// What the sampler derives once per (request, spp): the stratification
-/// grid side and the permutation multipliers.
+/// What the sampler derives once per spp: the stratification grid side.
 #[derive(Debug, Clone, Copy)]
 pub struct Strata {
     spp: u64,
     inv_spp: f64,
-    by_spp: Divisor,
     k: u64,
     inv_k: f64,
     by_k: Divisor,
-    by_cells: Divisor,
     cells: u64,
-    /// Multipliers of the affine permutations: of `0..spp` (time), of the
-    /// k² cells (pairs), of `0..k` (sub-positions in a cell).
-    a_time: u64,
-    a_cell: u64,
-    a_sub: u64,
 }
 
 impl Strata {
@@ -102,19 +121,7 @@ impl Strata {
     pub fn new(spp: u64) -> Self {
         let spp = spp.max(1);
         let k = (spp as f64).sqrt().ceil().max(1.0) as u64;
-        Strata {
-            spp,
-            inv_spp: 1.0 / spp as f64,
-            by_spp: Divisor::new(spp),
-            k,
-            inv_k: 1.0 / k as f64,
-            by_k: Divisor::new(k),
-            by_cells: Divisor::new(k * k),
-            cells: k * k,
-            a_time: coprime(spp, 3),
-            a_cell: coprime(k * k, 1),
-            a_sub: coprime(k, 2),
-        }
+        Strata { spp, inv_spp: 1.0 / spp as f64, k, inv_k: 1.0 / k as f64, by_k: Divisor::new(k), cells: k * k }
     }
 }
 
@@ -126,11 +133,11 @@ pub struct PixelSeed {
     /// The pixel's row.
     pub y: u32,
     seed: u64,
-    /// Random offsets of the time permutation and of the three pairs' cell permutations.
-    time_offset: u64,
-    cell_offsets: [u64; 3],
-    /// Per pair and axis, the random offset of the sub-position shuffles.
-    line_offsets: [[u64; 2]; 3],
+    /// Keys of the time permutation and of the three pairs' cell permutations.
+    time_key: u64,
+    cell_keys: [u64; 3],
+    /// Per pair and axis, the key of the sub-position permutations.
+    line_keys: [[u64; 2]; 3],
 }
 
 impl Sampler {
@@ -144,17 +151,15 @@ impl Sampler {
     pub fn pixel(&self, x: u32, y: u32, strata: &Strata) -> PixelSeed {
         let index = (y as u64) * self.width as u64 + x as u64;
         let seed = mix(index ^ mix(self.request.wrapping_add(0x5EED)));
-        let offset = |d: u64, n: u64| mix(seed ^ d) % n;
+        let key = |d: u64| mix(seed ^ (d << 40));
+        let _ = strata;
         PixelSeed {
             x,
             y,
             seed,
-            time_offset: offset(3, strata.spp),
-            cell_offsets: [offset(4, strata.cells), offset(5, strata.cells), offset(6, strata.cells)],
-            // Reduced mod k: the shuffles' operands then stay below 2³² (fast division).
-            line_offsets: std::array::from_fn(|p| {
-                std::array::from_fn(|axis| mix(seed ^ ((p as u64 * 2 + axis as u64 + 7) << 40)) % strata.k)
-            }),
+            time_key: key(3),
+            cell_keys: [key(4), key(5), key(6)],
+            line_keys: std::array::from_fn(|p| std::array::from_fn(|axis| key(p as u64 * 2 + axis as u64 + 7))),
         }
     }
 
@@ -162,27 +167,28 @@ impl Sampler {
     /// of a pixel; the others are left 0.
     ///
     /// Each pair (IMAGE, LENS, LIGHT) is multi-jittered: sample `s` takes
-    /// cell `(a·s + b) mod k²` of a k × k grid (all cells once when spp = k²;
-    /// otherwise an evenly spread random subset, each cell equally likely),
-    /// and inside its cell the sub-column and sub-row come from random
-    /// permutations per column and per row, so the 2-D distribution is
-    /// uniform and, for square spp, each 1-D projection has one sample in
-    /// each of k² intervals. TIME has one sample in each of spp intervals.
+    /// cell `π(s)` of a k × k grid, π a random permutation of the k² cells
+    /// (all cells once when spp = k²; otherwise a random subset), and inside
+    /// its cell the sub-column and sub-row come from random permutations per
+    /// column and per row, so the 2-D distribution is uniform and, for
+    /// square spp, each 1-D projection has one sample in each of k²
+    /// intervals. TIME has one sample in each of spp intervals. Every pair
+    /// and TIME have their own independent permutations (per pixel and
+    /// request), so the dimensions are independent of each other: an
+    /// estimate converges to the integral over all of them, whatever the
+    /// request.
     #[inline(always)]
     pub fn pixel_sample(&self, pixel: &PixelSeed, strata: &Strata, s: u64, needed: u8) -> [f64; 7] {
         let u = |d: u64| uniform(mix(pixel.seed ^ (s << 4 | d)));
         let inv_k = strata.inv_k;
         let below_one = |v: f64| v.min(1.0 - f64::EPSILON);
         let pair = |which: usize, d: u64| {
-            let cell = strata.by_cells.div_mod(strata.a_cell * s + pixel.cell_offsets[which]).1;
+            let cell = permute(s, strata.cells, pixel.cell_keys[which]);
             let (row, column) = strata.by_k.div_mod(cell);
-            // Sub-column of the sample in its cell: a permutation of the rows
-            // of its column, shifted by a random per-pixel, per-column offset
-            // (an odd stride per line), so it is uniform over pixels; likewise
-            // the sub-row.
+            // Sub-column of the sample in its cell: a random permutation of
+            // the rows of its column (one per column); likewise the sub-row.
             let shuffle = |axis: usize, line: u64, position: u64| {
-                let offset = pixel.line_offsets[which][axis] + line * 0x9E37;
-                strata.by_k.div_mod(strata.a_sub * position + offset).1
+                permute(position, strata.k, pixel.line_keys[which][axis] ^ mix(line))
             };
             let sub_x = shuffle(0, column, row) as i64 as f64;
             let sub_y = shuffle(1, row, column) as i64 as f64;
@@ -204,7 +210,7 @@ impl Sampler {
             (p[2], p[3]) = pair(1, 2);
         }
         if has(4) {
-            let stratum = strata.by_spp.div_mod(strata.a_time * s + pixel.time_offset).1;
+            let stratum = permute(s, strata.spp, pixel.time_key);
             p[4] = below_one((stratum as i64 as f64 + u(4)) * strata.inv_spp);
         }
         if has(5) || has(6) {
@@ -269,6 +275,52 @@ mod tests {
                 n = mix(n);
                 for v in [n & 0xFFFF, n & 0xFFFF_FFFF, n >> 8, d - 1, d, d + 1, u32::MAX as u64] {
                     assert_eq!(by.div_mod(v), (v / d, v % d), "{v} / {d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn permute_is_a_bijection_for_every_size_and_key() {
+        for n in [1u64, 2, 3, 5, 16, 17, 100, 1024, 1025, 4096] {
+            for key in [0u64, 1, 0xDEAD_BEEF, u64::MAX] {
+                let mut seen = vec![false; n as usize];
+                for i in 0..n {
+                    let v = permute(i, n, key) as usize;
+                    assert!(!seen[v], "n {n} key {key}: {v} twice");
+                    seen[v] = true;
+                }
+            }
+        }
+        let a: Vec<u64> = (0..64).map(|i| permute(i, 64, 1)).collect();
+        let b: Vec<u64> = (0..64).map(|i| permute(i, 64, 2)).collect();
+        assert_ne!(a, b, "different keys give different orders");
+    }
+
+    // Regression: the pairs' cells were (a·s + bᵢ) mod k² with one
+    // multiplier a for every pair, so within a pixel the lens (and light)
+    // position was the image position plus a fixed offset: an estimate of
+    // a function of both converged, per request, to a wrong value (the
+    // depth-of-field references stopped improving with more samples).
+    #[test]
+    fn every_pair_of_dimensions_is_independent_within_a_pixel() {
+        let spp = 1024;
+        let strata = Strata::new(spp);
+        for request in 0..4 {
+            let sampler = Sampler::new(8, 8, request);
+            for (px, py) in [(0, 0), (3, 5), (7, 7)] {
+                let pixel = sampler.pixel(px, py, &strata);
+                let points: Vec<[f64; 7]> = (0..spp).map(|s| sampler.pixel_sample(&pixel, &strata, s, 0x7F)).collect();
+                let frac = |p: &[f64; 7], d: usize| if d < 2 { p[d].fract() } else { p[d] };
+                for a in 0..7 {
+                    for b in a + 1..7 {
+                        // E[(A − B)²] = 1/6 for independent uniforms.
+                        let m = points.iter().map(|p| (frac(p, a) - frac(p, b)).powi(2)).sum::<f64>() / spp as f64;
+                        assert!(
+                            (m - 1.0 / 6.0).abs() < 0.02,
+                            "request {request}, pixel ({px}, {py}), dims {a}/{b}: {m}"
+                        );
+                    }
                 }
             }
         }
