@@ -238,16 +238,18 @@ pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) 
         prev = Some((hit.p, s.pdf));
         ray = spawn(scene, &hit, wi, ray.time);
         depth += 1;
-        // Russian roulette.
+        // Russian roulette; not while the path still looks for its first
+        // non-specular hit, whose features must not be left to chance.
         let rr_beta = beta * eta_scale;
-        if rr_beta.max_component() < 1.0 && depth > 1 {
+        let searching = wanted.geometry && !found_non_specular;
+        if wanted.radiance && !searching && rr_beta.max_component() < 1.0 && depth > 1 {
             let q = (1.0 - rr_beta.max_component()).max(0.0);
             if dims.get(base + 6) < q {
                 break;
             }
             beta = beta / (1.0 - q);
         }
-        if !beta.is_finite() || beta.is_black() {
+        if !beta.is_finite() || (beta.is_black() && !searching) {
             break;
         }
     }
@@ -289,7 +291,8 @@ fn share(a: Vec3, b: Vec3) -> Vec3 {
 /// A ray leaving `hit` along `dir`, offset off the surface on `dir`'s side.
 #[inline]
 fn spawn(scene: &Scene, hit: &SurfaceHit, dir: Vec3, time: f32) -> Ray {
-    let eps = scene.epsilon(hit.p);
+    // The hit point's error grows with the distance travelled (curves are hit at origin + t·dir).
+    let eps = scene.epsilon(hit.p).max(hit.t * 2e-6);
     let n = if dir.dot(hit.ng) > 0.0 { hit.ng } else { -hit.ng };
     Ray { origin: hit.p + n * eps, dir, time }
 }

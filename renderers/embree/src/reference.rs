@@ -51,7 +51,7 @@ pub fn scene_digest(scene_file: &std::path::Path) -> anyhow::Result<String> {
 }
 
 /// Bumped whenever rendering changes what a converged image is.
-pub const RENDERER_VERSION: u32 = 2;
+pub const RENDERER_VERSION: u32 = 3;
 
 fn generator() -> String {
     format!("fbksd-embree {}, renderer {RENDERER_VERSION}", env!("CARGO_PKG_VERSION"))

@@ -25,6 +25,16 @@ impl Rng {
     }
 }
 
+/// Plastic with a coating of index 1.5.
+fn coated(distribution: Ggx, reflectance: Vec3) -> Bsdf {
+    Bsdf::Coated(Coated {
+        distribution,
+        eta: 1.5,
+        reflectance,
+        internal_reflectance: Coated::internal_reflectance(1.5),
+    })
+}
+
 fn gold() -> Vec3 {
     vec3(0.143, 0.374, 1.442)
 }
@@ -45,14 +55,8 @@ fn models() -> Vec<(&'static str, Bsdf)> {
         ("conductor α=1", Bsdf::Conductor(Conductor { distribution: Ggx::new(1.0, 1.0), eta: gold(), k: gold_k() })),
         ("dielectric α=0.3", Bsdf::Dielectric(Dielectric { distribution: Ggx::new(0.3, 0.3), eta: 1.5 })),
         ("dielectric α=0.1", Bsdf::Dielectric(Dielectric { distribution: Ggx::new(0.1, 0.1), eta: 1.33 })),
-        (
-            "coated α=0.2",
-            Bsdf::Coated(Coated { distribution: Ggx::new(0.2, 0.2), eta: 1.5, reflectance: vec3(0.7, 0.2, 0.1) }),
-        ),
-        (
-            "coated smooth",
-            Bsdf::Coated(Coated { distribution: Ggx::new(0.0, 0.0), eta: 1.5, reflectance: vec3(0.5, 0.5, 0.5) }),
-        ),
+        ("coated α=0.2", coated(Ggx::new(0.2, 0.2), vec3(0.7, 0.2, 0.1))),
+        ("coated smooth", coated(Ggx::new(0.0, 0.0), vec3(0.5, 0.5, 0.5))),
     ]
 }
 
@@ -199,6 +203,25 @@ fn no_model_reflects_or_transmits_more_than_it_receives() {
 }
 
 #[test]
+fn smooth_white_plastic_reflects_everything() {
+    // The coating reflects F(θo); the white base returns all of the rest.
+    let mut rng = Rng(17);
+    let bsdf = coated(Ggx::new(0.0, 0.0), Vec3::ONE);
+    for theta in [0.0, 30.0, 60.0, 80.0] {
+        let wo = direction(theta, 20.0);
+        let n = 200_000;
+        let mean = (0..n)
+            .map(|_| match bsdf.sample(wo, rng.next(), [rng.next(), rng.next()]) {
+                Some(s) => (s.f.x * s.wi.z.abs() / s.pdf) as f64,
+                None => 0.0,
+            })
+            .sum::<f64>()
+            / n as f64;
+        assert!((mean - 1.0).abs() < 0.01, "θo = {theta}: albedo {mean}");
+    }
+}
+
+#[test]
 fn reflection_is_reciprocal() {
     let mut rng = Rng(5);
     for (name, bsdf) in models() {
@@ -234,7 +257,7 @@ fn extreme_parameters_give_finite_values() {
         extremes.push(Bsdf::Dielectric(Dielectric { distribution: Ggx::new(alpha, alpha), eta: 1.5 }));
         extremes.push(Bsdf::Dielectric(Dielectric { distribution: Ggx::new(alpha, alpha), eta: 1.0 }));
         extremes.push(Bsdf::Dielectric(Dielectric { distribution: Ggx::new(alpha, alpha), eta: 1.0001 }));
-        extremes.push(Bsdf::Coated(Coated { distribution: Ggx::new(alpha, alpha), eta: 1.5, reflectance: Vec3::ONE }));
+        extremes.push(coated(Ggx::new(alpha, alpha), Vec3::ONE));
     }
     // Grazing and exactly tangent directions included.
     let dirs = [

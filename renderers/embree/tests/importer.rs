@@ -65,6 +65,23 @@ fn motion_blur_comes_from_transform_times_and_active_transform() {
 }
 
 #[test]
+fn reverse_orientation_flips_given_normals_and_world_begin_resets_the_active_transform() {
+    let text = format!(
+        "{CAMERA}ActiveTransform StartTime\nWorldBegin\nTranslate 0 0 1\nReverseOrientation\n\
+         Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"normal N\" [0 0 1 0 0 1 0 0 1]\n"
+    );
+    let s = scene(&text, &[]).unwrap();
+    match &s.shapes[0].geometry {
+        Geometry::Mesh { normals: Some(n), positions, .. } => {
+            assert_eq!(n[0][0].z, -1.0, "pbrt-v4 negates N under ReverseOrientation");
+            assert_eq!(positions.len(), 1, "the Translate applied to both times: not moving");
+            assert_eq!(positions[0][0][2], 1.0);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
 fn options_directives_set_the_camera_film_and_integrator() {
     let text = "ColorSpace \"srgb\"\nSampler \"zsobol\" \"integer pixelsamples\" 64\nPixelFilter \"box\"\n\
                 Integrator \"path\" \"integer maxdepth\" 9\n\

@@ -320,3 +320,19 @@ fn features_without_colour_are_the_same_features_at_a_fraction_of_the_rays() {
     let many = common::rays(&cornell, &layout(&["WORLD_X", "NORMAL_Y", "TEXTURE_COLOR_R_NS", "DEPTH", "COLOR_R"]), 1);
     assert!(few * 2 < many, "{few} rays for features alone, {many} with colour");
 }
+
+#[test]
+fn sphere_texture_coordinates_follow_pbrt() {
+    // Seen from above (+y, with the sphere's z axis turned to +y), the
+    // top of the sphere is its +z pole, where pbrt's v is 1.
+    let text = header(8, 8, 10.0, 1).replace("LookAt 0 0 0  0 0 1  0 1 0", "LookAt 0 10 0  0 0 0  0 0 1")
+        + "Texture \"halves\" \"spectrum\" \"checkerboard\" \"float uscale\" 1 \"float vscale\" 2 \"rgb tex1\" [0.2 0.2 0.2] \"rgb tex2\" [0.8 0.8 0.8]\n\
+           Material \"diffuse\" \"texture reflectance\" \"halves\"\nRotate -90 1 0 0\nScale 2 2 2\nShape \"sphere\"\n";
+    let scene = scene(&text, &[]).unwrap();
+    let l = layout(&["TEXTURE_COLOR_R", "WORLD_Y"]);
+    let (data, _) = samples(&scene, &l, 1, 0);
+    for s in data.chunks_exact(2) {
+        assert!(s[1] > 1.7, "hits the top of the sphere: y {}", s[1]);
+        assert_eq!(s[0], 0.8, "v near 1 is the upper half of the texture");
+    }
+}

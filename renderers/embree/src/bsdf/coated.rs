@@ -1,10 +1,13 @@
 //! Plastic: a dielectric coating with GGX roughness over a Lambertian base.
 //!
-//! The coating reflects by the microfacet model with dielectric Fresnel;
-//! the base receives what the coating transmits on the way in and out,
-//! `R/π · (1 − F(θo)) · (1 − F(θi))`. Inter-reflection between base and
-//! coating is not modelled (energy is lost, never created). Sampling picks
-//! the coating with a probability that follows its Fresnel weight.
+//! The coating reflects by the microfacet model with dielectric Fresnel.
+//! Light it transmits reaches the base, bounces between base and coating,
+//! and leaves: `R / (1 − R·F_int) · (1 − F(θi)) (1 − F(θo)) / (π η²)`,
+//! where `F_int` is the coating's hemispherical reflectance seen from
+//! inside (the classic plastic model of Weidlich–Wilkie / Mitsuba). With a
+//! white base the diffuse part reflects exactly `1 − F(θo)`, so nothing is
+//! created. Sampling picks the coating with a probability that follows its
+//! Fresnel weight.
 
 use super::fresnel::{dielectric as fresnel, reflect};
 use super::microfacet::Ggx;
@@ -21,13 +24,24 @@ pub struct Coated {
     pub eta: f32,
     /// The base's albedo.
     pub reflectance: Vec3,
+    /// The coating's hemispherical reflectance from inside,
+    /// `1 − (1 − F_dr(η)) / η²` ([`Coated::internal_reflectance`]).
+    pub internal_reflectance: f32,
 }
 
 impl Coated {
+    /// The hemispherical reflectance of a coating of index `eta` seen from inside.
+    pub fn internal_reflectance(eta: f32) -> f32 {
+        1.0 - (1.0 - super::fresnel::diffuse_reflectance(eta)) / (eta * eta)
+    }
+
     /// Probability of sampling the coating for outgoing `wo`.
     fn coat_probability(&self, wo: Vec3) -> f32 {
         let specular = fresnel(wo.z.abs(), self.eta);
         let diffuse = (1.0 - specular) * self.reflectance.average();
+        if !(specular + diffuse > 0.0) {
+            return 0.5;
+        }
         (specular / (specular + diffuse)).clamp(0.1, 0.9)
     }
 
@@ -37,7 +51,9 @@ impl Coated {
             return (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
         }
         let transmitted = (1.0 - fresnel(wo.z.abs(), self.eta)) * (1.0 - fresnel(wi.z.abs(), self.eta));
-        let diffuse = self.reflectance * (FRAC_1_PI * transmitted);
+        let r = self.reflectance;
+        let bounces = (Vec3::ONE - r * self.internal_reflectance).map(|d| 1.0 / d.max(1e-6));
+        let diffuse = r * bounces * (FRAC_1_PI * transmitted / (self.eta * self.eta));
         let mut coat = Vec3::ZERO;
         let d = &self.distribution;
         let wm = (wo + wi).normalize();

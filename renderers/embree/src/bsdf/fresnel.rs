@@ -28,6 +28,19 @@ pub fn dielectric(cos_i: f32, eta: f32) -> f32 {
     }
 }
 
+/// Hemispherical average of the dielectric Fresnel reflectance for light
+/// arriving from outside, `∫₀¹ 2μ F(μ, η) dμ` (midpoint rule, 1024 points).
+pub fn diffuse_reflectance(eta: f32) -> f32 {
+    const N: usize = 1024;
+    (0..N)
+        .map(|i| {
+            let mu = (i as f32 + 0.5) / N as f32;
+            2.0 * mu * dielectric(mu, eta)
+        })
+        .sum::<f32>()
+        / N as f32
+}
+
 /// Fresnel reflectance of a conductor with complex index `eta + i·k`, per channel.
 #[inline]
 pub fn conductor(cos_i: f32, eta: Vec3, k: Vec3) -> Vec3 {
@@ -121,6 +134,13 @@ mod tests {
         assert!((conductor(0.7, Vec3::splat(1.5), Vec3::ZERO).x - dielectric(0.7, 1.5)).abs() < 1e-5);
         let r = conductor(1.0, Vec3::ONE, k_from_reflectance(Vec3::splat(0.6)));
         assert!((r.x - 0.6).abs() < 1e-4, "{r:?}");
+    }
+
+    #[test]
+    fn diffuse_reflectance_matches_known_values() {
+        // η = 1: nothing is reflected; η = 1.5: about 0.092 (Egan and Hilgeman's fit gives 0.0918).
+        assert!(diffuse_reflectance(1.0) < 1e-6);
+        assert!((diffuse_reflectance(1.5) - 0.092).abs() < 0.002, "{}", diffuse_reflectance(1.5));
     }
 
     #[test]

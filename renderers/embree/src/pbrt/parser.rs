@@ -383,6 +383,7 @@ impl Parser {
                 self.need_world(loc, name, false)?;
                 self.in_world = true;
                 self.state.ctm = [Transform::IDENTITY; 2];
+                self.state.active = Active::All;
                 self.coordinate_systems.insert("world".into(), self.state.ctm);
             }
             "WorldEnd" => {} // pbrt-v3 files end with it; nothing to do.
@@ -682,11 +683,15 @@ impl Parser {
                 Material::Conductor { index, roughness: self.roughness(params, 0.0)? }
             }
             "dielectric" => Material::Dielectric { eta: eta(1.5)?, roughness: self.roughness(params, 0.0)? },
-            "coateddiffuse" => Material::CoatedDiffuse {
-                reflectance: self.spectrum_texture(params, "reflectance", Vec3::splat(0.5))?,
-                roughness: self.roughness(params, 0.0)?,
-                eta: eta(1.5)?,
-            },
+            "coateddiffuse" => {
+                let eta = eta(1.5)?;
+                Material::CoatedDiffuse {
+                    reflectance: self.spectrum_texture(params, "reflectance", Vec3::splat(0.5))?,
+                    roughness: self.roughness(params, 0.0)?,
+                    eta,
+                    internal_reflectance: crate::bsdf::coated::Coated::internal_reflectance(eta),
+                }
+            }
             "" | "none" | "interface" => {
                 return Err(SceneError::at(loc, "interface materials (participating media) are not supported"))
             }
@@ -757,8 +762,11 @@ impl Parser {
                         .map(|t| positions.iter().map(|p| t.point(*p).to_array()).collect())
                         .collect(),
                     indices,
-                    normals: normals
-                        .map(|n| steps.iter().map(|t| n.iter().map(|v| t.normal(*v).normalize()).collect()).collect()),
+                    // pbrt-v4 negates given normals under ReverseOrientation (not for handedness).
+                    normals: normals.map(|n| {
+                        let sign = if self.state.reverse_orientation { -1.0 } else { 1.0 };
+                        steps.iter().map(|t| n.iter().map(|v| t.normal(*v).normalize() * sign).collect()).collect()
+                    }),
                     uvs,
                     flip,
                 }

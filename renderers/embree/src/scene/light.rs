@@ -56,14 +56,16 @@ pub struct LightTriangle {
     pub e1: Vec3,
     /// Third vertex − first.
     pub e2: Vec3,
-    /// Unit normal, oriented as pbrt orients the surface.
+    /// Unit normal from the winding (flipped when the mesh says so).
     pub n: Vec3,
+    /// Vertex normals, when the mesh has them: the emitting side then
+    /// follows the normal interpolated at the point, as at a ray hit.
+    pub vertex_normals: Option<[Vec3; 3]>,
 }
 
 impl LightTriangle {
-    /// The triangles of a static mesh: normals follow the vertex normals
-    /// when the mesh has them (their sum per triangle), else the winding,
-    /// flipped when `flip`.
+    /// The triangles of a static mesh: normals from the winding, flipped
+    /// when `flip` (without vertex normals), and the vertex normals.
     pub fn of_mesh(
         positions: &[[f32; 3]],
         indices: &[[u32; 3]],
@@ -75,13 +77,10 @@ impl LightTriangle {
             .map(|idx| {
                 let v = |k: usize| Vec3::from_array(positions[idx[k] as usize]);
                 let (p0, e1, e2) = (v(0), v(1) - v(0), v(2) - v(0));
-                let mut n = e1.cross(e2).normalize();
-                match normals {
-                    Some(ns) => n = n.face_forward(ns[idx[0] as usize] + ns[idx[1] as usize] + ns[idx[2] as usize]),
-                    None if flip => n = -n,
-                    None => {}
-                }
-                LightTriangle { p0, e1, e2, n }
+                let n = e1.cross(e2).normalize();
+                let n = if flip && normals.is_none() { -n } else { n };
+                let vertex_normals = normals.map(|ns| idx.map(|i| ns[i as usize]));
+                LightTriangle { p0, e1, e2, n, vertex_normals }
             })
             .collect()
     }
@@ -145,10 +144,17 @@ impl Light {
                 let t = &triangles[k];
                 let s = u0.sqrt();
                 // Barycentrics (1 − √u₀, u₁√u₀, (1 − u₁)√u₀): uniform over the triangle.
-                let point = t.p0 + t.e1 * (u[1] * s) + t.e2 * ((1.0 - u[1]) * s);
-                self.area_sample(p, point, t.n, 1.0 / area)
+                let (b1, b2) = (u[1] * s, (1.0 - u[1]) * s);
+                let point = t.p0 + t.e1 * b1 + t.e2 * b2;
+                let n = match t.vertex_normals {
+                    Some([n0, n1, n2]) => t.n.face_forward(n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2),
+                    None => t.n,
+                };
+                self.area_sample(p, point, n, 1.0 / area)
             }
-            Light::Sphere { center, radius, .. } => {
+            Light::Sphere { center, radius, flip, .. } => {
+                // The emitting side's normal: outward, or inward under ReverseOrientation.
+                let oriented = |n: Vec3| if *flip { -n } else { n };
                 let to_center = *center - p;
                 let dc2 = to_center.length_squared();
                 let r2 = radius * radius;
@@ -159,7 +165,7 @@ impl Light {
                     let phi = 2.0 * PI * u[1];
                     let n = vec3(rr * phi.cos(), rr * phi.sin(), z);
                     let area = 4.0 * PI * r2;
-                    return self.area_sample(p, *center + n * *radius, n, 1.0 / area);
+                    return self.area_sample(p, *center + n * *radius, oriented(n), 1.0 / area);
                 }
                 // Outside: sample the cone of directions the sphere subtends.
                 let dc = dc2.sqrt();
@@ -183,7 +189,7 @@ impl Light {
                 let disc = (r2 - (dc2 - b * b)).max(0.0);
                 let distance = (b - disc.sqrt()).max(0.0);
                 let point = p + wi * distance;
-                let n = (point - *center).normalize();
+                let n = oriented((point - *center).normalize());
                 let radiance = self.emitted(n, -wi);
                 let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
                 (pdf.is_finite() && distance > 0.0).then_some(LightSample { wi, distance, radiance, pdf })
@@ -328,5 +334,14 @@ mod tests {
         let inside = center + vec3(0.1, -0.2, 0.3);
         let e = estimate_irradiance(&light, inside, n, |s| normal_at(s, inside));
         assert!((e - PI as f64).abs() < 0.02 * PI as f64, "inside: {e}");
+        // A one-sided sphere under ReverseOrientation is a dome: it lights its inside only.
+        let dome = Light::Sphere { shape: 0, center, radius: 0.8, radiance: Vec3::ONE, two_sided: false, flip: true };
+        let inward = |s: &LightSample, p: Vec3| {
+            let (point, n) = normal_at(s, p);
+            (point, -n)
+        };
+        let e = estimate_irradiance(&dome, inside, n, |s| inward(s, inside));
+        assert!((e - PI as f64).abs() < 0.02 * PI as f64, "inside the dome: {e}");
+        assert_eq!(estimate_irradiance(&dome, p, n, |s| inward(s, p)), 0.0, "outside the dome");
     }
 }

@@ -68,6 +68,8 @@ pub enum Material {
         roughness: Roughness,
         /// The coating's index of refraction.
         eta: f32,
+        /// See [`Coated::internal_reflectance`] (computed once).
+        internal_reflectance: f32,
     },
 }
 
@@ -87,10 +89,11 @@ impl Material {
             Material::Dielectric { eta, roughness } => {
                 Bsdf::Dielectric(Dielectric { distribution: roughness.distribution(uv), eta: *eta })
             }
-            Material::CoatedDiffuse { reflectance, roughness, eta } => Bsdf::Coated(Coated {
+            Material::CoatedDiffuse { reflectance, roughness, eta, internal_reflectance } => Bsdf::Coated(Coated {
                 distribution: roughness.distribution(uv),
                 eta: *eta,
                 reflectance: clamp01(reflectance.eval(uv)),
+                internal_reflectance: *internal_reflectance,
             }),
         }
     }

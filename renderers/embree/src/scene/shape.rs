@@ -183,10 +183,12 @@ impl Geometry {
                 }
                 // Re-project onto the sphere: removes the error of origin + t·dir.
                 let p = center + n * s[3];
-                let local = to_object.vector(n);
+                let local = to_object.vector(n).normalize();
                 let phi = local.y.atan2(local.x);
                 let phi = if phi < 0.0 { phi + 2.0 * std::f32::consts::PI } else { phi };
-                let uv = [phi / (2.0 * std::f32::consts::PI), local.z.clamp(-1.0, 1.0).acos() / std::f32::consts::PI];
+                // pbrt-v4: v runs from the −z pole (0) to the +z pole (1).
+                let uv =
+                    [phi / (2.0 * std::f32::consts::PI), 1.0 - local.z.clamp(-1.0, 1.0).acos() / std::f32::consts::PI];
                 let ng = if *flip { -n } else { n };
                 (p, ng, ng, uv)
             }
