@@ -31,17 +31,13 @@ impl Bindings {
     /// Binds a layout.
     pub fn new(layout: &CompiledLayout) -> Bindings {
         use Feature::*;
-        let mut inputs = [None; 7];
+        let inputs = layout.input_offsets();
         let mut wanted = Wanted { roughness_threshold: layout.roughness_threshold(), ..Wanted::default() };
         let outputs = layout
             .elements()
             .iter()
-            .enumerate()
-            .map(|(i, (element, io))| match element {
-                Element::Parameter(p) if *io == ElementIo::Input => {
-                    inputs[p.index()] = Some(i);
-                    None
-                }
+            .map(|(element, io)| match element {
+                Element::Parameter(_) if *io == ElementIo::Input => None,
                 Element::Parameter(p) => Some(Source::Parameter(p.index())),
                 Element::Feature(f, n) => {
                     match f {

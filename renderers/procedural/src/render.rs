@@ -36,16 +36,12 @@ enum Source {
 impl Bindings {
     /// Binds a (specialised) program to a layout.
     pub fn new(program: &Program, layout: &CompiledLayout) -> Bindings {
-        let mut inputs = [None; 7];
+        let inputs = layout.input_offsets();
         let outputs = layout
             .elements()
             .iter()
-            .enumerate()
-            .map(|(i, (element, io))| match element {
-                Element::Parameter(p) if *io == ElementIo::Input => {
-                    inputs[p.index()] = Some(i);
-                    None
-                }
+            .map(|(element, io)| match element {
+                Element::Parameter(_) if *io == ElementIo::Input => None,
                 Element::Parameter(p) => Some(Source::Parameter(p.index())),
                 Element::Feature(f, n) => Some(program.feature_slot(*f, *n).map_or(Source::Zero, Source::Slot)),
             })

@@ -378,6 +378,14 @@ impl CompiledLayout {
     pub fn is_input(&self, p: RandomParameter) -> bool {
         self.parameter_offset(p).is_some_and(|i| self.elements[i].1 == ElementIo::Input)
     }
+    /// Per random parameter (by [`RandomParameter::index`]), the offset of
+    /// its value in a sample when the technique gives it (INPUT).
+    pub fn input_offsets(&self) -> [Option<usize>; 7] {
+        std::array::from_fn(|d| {
+            let p = RandomParameter::ALL[d];
+            self.parameter_offset(p).filter(|_| self.is_input(p))
+        })
+    }
     /// Whether any element is INPUT.
     pub fn has_input(&self) -> bool {
         self.elements.iter().any(|(_, io)| *io == ElementIo::Input)

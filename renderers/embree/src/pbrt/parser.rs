@@ -9,7 +9,7 @@ use crate::scene::light::{area_cdf, Light, LightTriangle};
 use crate::scene::material::{ConductorIndex, Material, Roughness};
 use crate::scene::shape::{Geometry, Shape};
 use crate::scene::texture::{read_image, Encoding, Texture, UvMapping, Wrap};
-use crate::scene::{Scene, SceneParts};
+use crate::scene::Scene;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -960,15 +960,7 @@ impl Parser {
             Some(dir) if stem == "scene" || stem == "small" => dir,
             _ => stem,
         };
-        Scene::build(SceneParts {
-            name,
-            camera,
-            max_depth,
-            shapes: self.shapes,
-            materials: self.materials,
-            lights: self.lights,
-            transform_times: self.transform_times,
-        })
-        .map_err(|e| SceneError { loc: None, message: e.to_string() })
+        Scene::build(name, camera, max_depth, self.shapes, self.materials, self.lights, self.transform_times)
+            .map_err(|e| SceneError { loc: None, message: e.to_string() })
     }
 }

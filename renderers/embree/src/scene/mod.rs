@@ -43,28 +43,17 @@ pub struct Scene {
     bvh: Bvh,
 }
 
-/// What a scene is made of, before the BVH is built.
-pub struct SceneParts {
-    /// See [`Scene::name`].
-    pub name: String,
-    /// See [`Scene::camera`].
-    pub camera: Camera,
-    /// See [`Scene::max_depth`].
-    pub max_depth: u32,
-    /// See [`Scene::shapes`].
-    pub shapes: Vec<Shape>,
-    /// See [`Scene::materials`].
-    pub materials: Vec<Material>,
-    /// See [`Scene::lights`].
-    pub lights: Vec<Light>,
-    /// See [`Scene::transform_times`].
-    pub transform_times: [f32; 2],
-}
-
 impl Scene {
-    /// Builds the BVH and the light distribution.
-    pub fn build(parts: SceneParts) -> Result<Scene, EmbreeError> {
-        let SceneParts { name, camera, max_depth, shapes, materials, lights, transform_times } = parts;
+    /// A scene of these parts (see the fields), with its BVH and light distribution built.
+    pub fn build(
+        name: String,
+        camera: Camera,
+        max_depth: u32,
+        shapes: Vec<Shape>,
+        materials: Vec<Material>,
+        lights: Vec<Light>,
+        transform_times: [f32; 2],
+    ) -> Result<Scene, EmbreeError> {
         let primitives: Vec<_> = shapes.iter().map(|s| s.geometry.primitives()).collect();
         let bvh = Bvh::build(&primitives)?;
         drop(primitives);
