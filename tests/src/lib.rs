@@ -3,7 +3,7 @@
 //!
 //! The tests start real processes (the `fbksd` CLI, the analytic renderer,
 //! techniques), so the workspace's binaries must be built first:
-//! `cargo build --workspace --bins` (README's test command does it).
+//! `cargo build --workspace` (README's test command does it; it also builds `libfbksd.so`).
 
 use std::path::{Path, PathBuf};
 
@@ -19,7 +19,7 @@ pub fn bin_dir() -> PathBuf {
 /// Path of a workspace binary; panics with the command that builds it.
 pub fn bin(name: &str) -> String {
     let path = bin_dir().join(name);
-    assert!(path.is_file(), "{} is missing: run `cargo build --workspace --bins` first", path.display());
+    assert!(path.is_file(), "{} is missing: run `cargo build --workspace` first", path.display());
     path.to_string_lossy().into_owned()
 }
 
