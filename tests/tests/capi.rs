@@ -1,36 +1,51 @@
-//! The C API through the whole protocol: a box filter written in C against
-//! `fbksd.h` and `libfbksd.so` gives the same image, bit for bit, as the
-//! Rust box filter; and its errors reach C as codes with messages.
+//! The C and C++ APIs through the whole protocol: a box filter written in C
+//! against `fbksd.h` and `libfbksd.so` gives the same image, bit for bit,
+//! as the Rust box filter; errors reach C as codes with messages; the
+//! thesis's C++ examples A.1 and A.2 compile unchanged against the C++
+//! headers and run.
 
 use fbksd_tests::{analytic_scene, bin, bin_dir};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+fn sdk(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk").join(path)
+}
+
 /// Compiles a C program against the committed header and the built library.
 fn compile_c(source: &Path, out: &Path) -> PathBuf {
-    let include = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk/capi/include");
+    compile("cc", &["-std=c99"], &[source], out)
+}
+
+/// Compiles C++ sources against the C++ headers and the built library.
+fn compile_cpp(sources: &[&Path], out: &Path) -> PathBuf {
+    compile("c++", &["-std=c++14", "-I", sdk("cpp/include").to_str().unwrap()], sources, out)
+}
+
+fn compile(compiler: &str, flags: &[&str], sources: &[&Path], out: &Path) -> PathBuf {
     let lib = bin_dir();
     assert!(lib.join("libfbksd.so").is_file(), "libfbksd.so is missing: run `cargo build --workspace` first");
-    let status = Command::new("cc")
-        .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-O2"])
+    let status = Command::new(compiler)
+        .args(flags)
+        .args(["-Wall", "-Wextra", "-Werror", "-O2"])
         .arg("-I")
-        .arg(&include)
-        .arg(source)
+        .arg(sdk("capi/include"))
+        .args(sources)
         .arg("-o")
         .arg(out)
         .arg(format!("-L{}", lib.display()))
         .arg(format!("-Wl,-rpath,{}", lib.display()))
         .arg("-lfbksd")
         .status()
-        .expect("a C compiler (cc)");
-    assert!(status.success(), "compiling {} failed", source.display());
+        .unwrap_or_else(|e| panic!("{compiler}: {e}"));
+    assert!(status.success(), "compiling {sources:?} failed");
     out.to_path_buf()
 }
 
 #[test]
 fn a_c_box_filter_matches_the_rust_box_filter_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk/capi/tests/c/box_filter.c");
+    let source = sdk("capi/tests/c/box_filter.c");
     let exe = compile_c(&source, &dir.path().join("box-filter-c"));
     let scene = analytic_scene(dir.path(), "conformance", 40, 24);
     let results = dir.path().join("results");
@@ -84,4 +99,34 @@ int main(void) {
     let output = Command::new(&exe).env_remove("FBKSD_RENDEZVOUS").output().unwrap();
     assert!(output.status.success(), "exit {:?}: {}", output.status.code(), String::from_utf8_lossy(&output.stderr));
     assert_eq!(String::from_utf8_lossy(&output.stdout).trim(), "ok");
+}
+
+#[test]
+fn the_thesis_cpp_examples_compile_unchanged_and_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let a1 = compile_cpp(&[&sdk("cpp/examples/a1_box_filter.cpp")], &dir.path().join("a1"));
+    let a2 = compile_cpp(
+        &[&sdk("cpp/examples/a2_random_sampler.cpp"), &sdk("cpp/examples/random_float.cpp")],
+        &dir.path().join("a2"),
+    );
+    let scene = analytic_scene(dir.path(), "examples", 40, 24);
+    let results = dir.path().join("results");
+    let output = Command::new(bin("fbksd"))
+        .args(["run", "-t", &format!("rust={}", bin("box-filter"))])
+        .args(["-t", &format!("a1={}", a1.display()), "-t", &format!("a2={}", a2.display())])
+        .args(["-r", &bin("fbksd-analytic-renderer"), "-s", scene.to_str().unwrap()])
+        .args(["--spp", "4,16", "--results", results.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    for spp in [4, 16] {
+        let read =
+            |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/examples/{spp}_0.exr"))).unwrap().2;
+        // A.1 sums in single precision; the Rust box filter in double.
+        let (rust, a1) = (read("rust"), read("a1"));
+        for (r, c) in rust.iter().zip(&a1) {
+            assert!((r - c).abs() <= 1e-5 * r.abs().max(1e-3), "A.1 at {spp} spp: {c} vs {r}");
+        }
+        assert_eq!(read("a2").len(), rust.len(), "A.2 ran and sent an image");
+    }
 }
