@@ -4,7 +4,7 @@
 set -euo pipefail
 
 # Debian packages the build and the tests need (Embree 3 for the path tracer).
-APT_PACKAGES=(build-essential pkg-config libembree-dev)
+APT_PACKAGES=(build-essential pkg-config cmake libembree-dev)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do

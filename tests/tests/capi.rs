@@ -130,3 +130,38 @@ fn the_thesis_cpp_examples_compile_unchanged_and_run() {
         assert_eq!(read("a2").len(), rust.len(), "A.2 ran and sent an image");
     }
 }
+
+#[test]
+fn a_cpp_technique_builds_with_find_package_and_matches_the_rust_box_filter() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let prefix = dir.path().join("sdk");
+    let run = |cmd: &mut Command| {
+        let out = cmd.output().unwrap();
+        assert!(
+            out.status.success(),
+            "{cmd:?}: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    // Install the SDK as a user would, then build the submission repository with CMake.
+    run(Command::new("bash").arg(root.join("deploy/install-sdk.sh")).arg(&prefix).arg(bin_dir()));
+    let build = dir.path().join("build");
+    run(Command::new("cmake")
+        .arg("-S")
+        .arg(root.join("sdk/techniques/box-filter-cpp"))
+        .arg("-B")
+        .arg(&build)
+        .arg(format!("-DCMAKE_PREFIX_PATH={}", prefix.display())));
+    run(Command::new("cmake").arg("--build").arg(&build));
+    let scene = analytic_scene(dir.path(), "cmake", 33, 17);
+    let results = dir.path().join("results");
+    run(Command::new(bin("fbksd"))
+        .args(["run", "-t", &format!("rust={}", bin("box-filter"))])
+        .args(["-t", &format!("cpp={}", build.join("box-filter-cpp").display())])
+        .args(["-r", &bin("fbksd-analytic-renderer"), "-s", scene.to_str().unwrap()])
+        .args(["--spp", "5", "--results", results.to_str().unwrap()]));
+    let read = |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/cmake/5_0.exr"))).unwrap().2;
+    assert_eq!(read("rust"), read("cpp"));
+}

@@ -1,0 +1,22 @@
+# The FBKSD CMake package, as installed by deploy/install-sdk.sh:
+#   <prefix>/lib/cmake/fbksd/fbksdConfig.cmake  (this file)
+#   <prefix>/lib/libfbksd.so                    (the C library)
+#   <prefix>/include/fbksd/...                  (C and C++ headers)
+#
+# A technique's CMakeLists.txt needs only:
+#   find_package(fbksd REQUIRED)
+#   target_link_libraries(my-technique fbksd::client)
+get_filename_component(_fbksd_prefix "${CMAKE_CURRENT_LIST_DIR}/../../.." ABSOLUTE)
+if(NOT EXISTS "${_fbksd_prefix}/lib/libfbksd.so")
+    set(fbksd_FOUND FALSE)
+    set(fbksd_NOT_FOUND_MESSAGE "${_fbksd_prefix}/lib/libfbksd.so is missing: reinstall with deploy/install-sdk.sh")
+    return()
+endif()
+if(NOT TARGET fbksd::client)
+    add_library(fbksd::client SHARED IMPORTED)
+    set_target_properties(fbksd::client PROPERTIES
+        IMPORTED_LOCATION "${_fbksd_prefix}/lib/libfbksd.so"
+        INTERFACE_INCLUDE_DIRECTORIES "${_fbksd_prefix}/include"
+        INTERFACE_COMPILE_FEATURES cxx_std_14)
+endif()
+set(fbksd_FOUND TRUE)
