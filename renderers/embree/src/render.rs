@@ -133,7 +133,7 @@ impl Drawer<'_> {
                     self.pixel = None;
                 }
                 if self.pixel.as_ref().is_none_or(|p| (p.x, p.y) != (x, y)) {
-                    self.pixel = Some(self.sampler.pixel(x, y, &self.strata));
+                    self.pixel = Some(self.sampler.pixel(x, y));
                 }
                 let pixel = self.pixel.as_ref().expect("set above");
                 (self.sampler.pixel_sample(pixel, &self.strata, s, self.needed), Dimensions::of_pixel_sample(pixel, s))
@@ -267,7 +267,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Rendered {
         let strata = Strata::new(spp);
         let mut row_rays = 0u64;
         for x in 0..w {
-            let pixel = sampler.pixel(x as u32, y as u32, &strata);
+            let pixel = sampler.pixel(x as u32, y as u32);
             let mut sum = [0f64; 3];
             for s in 0..spp {
                 let p = sampler.pixel_sample(&pixel, &strata, s, needed);

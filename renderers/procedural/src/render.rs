@@ -112,7 +112,7 @@ fn fill(
                         *strata = Strata::new(spp);
                     }
                     if pixel.as_ref().is_none_or(|px: &PixelSeed| (px.x, px.y) != (x, y)) {
-                        *pixel = Some(sampler.pixel(x, y, strata));
+                        *pixel = Some(sampler.pixel(x, y));
                     }
                     sampler.pixel_sample(pixel.as_ref().unwrap(), strata, s, bindings.needed)
                 }
@@ -200,7 +200,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
             let mut sums = vec![0f64; w * 3];
             let mut params = [[0.0f64; 7]; LANES];
             let strata = Strata::new(spp);
-            let mut pixel = sampler.pixel(0, y as u32, &strata);
+            let mut pixel = sampler.pixel(0, y as u32);
             let (mut x, mut s) = (0u32, 0u64);
             let mut columns = [0usize; LANES];
             let total = w as u64 * spp;
@@ -211,7 +211,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
                     if s == spp {
                         s = 0;
                         x += 1;
-                        pixel = sampler.pixel(x, y as u32, &strata);
+                        pixel = sampler.pixel(x, y as u32);
                     }
                     *p = sampler.pixel_sample(&pixel, &strata, s, needed);
                     *column = x as usize * 3;

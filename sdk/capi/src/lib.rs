@@ -362,30 +362,29 @@ pub struct FbksdTile {
 /// A callback receiving a tile; `user` is passed through.
 pub type FbksdTileCallback = Option<extern "C" fn(user: *mut c_void, tile: *const FbksdTile)>;
 
+/// The C view of a client tile (read-only or writable: both have the same accessors).
+macro_rules! c_tile {
+    ($tile:expr, $data:expr) => {
+        FbksdTile {
+            begin_x: $tile.begin_x(),
+            end_x: $tile.end_x(),
+            begin_y: $tile.begin_y(),
+            end_y: $tile.end_y(),
+            spp: $tile.spp(),
+            sample_size: $tile.sample_size(),
+            count: $tile.len(),
+            data: $data,
+        }
+    };
+}
+
 fn tile_of(tile: &BufferTile<'_>) -> FbksdTile {
-    FbksdTile {
-        begin_x: tile.begin_x(),
-        end_x: tile.end_x(),
-        begin_y: tile.begin_y(),
-        end_y: tile.end_y(),
-        spp: tile.spp(),
-        sample_size: tile.sample_size(),
-        count: tile.len(),
-        data: tile.data().as_ptr() as *mut f32,
-    }
+    c_tile!(tile, tile.data().as_ptr() as *mut f32)
 }
 
 fn tile_of_mut(tile: &mut BufferTileMut<'_>) -> FbksdTile {
-    FbksdTile {
-        begin_x: tile.begin_x(),
-        end_x: tile.end_x(),
-        begin_y: tile.begin_y(),
-        end_y: tile.end_y(),
-        spp: tile.spp(),
-        sample_size: tile.sample_size(),
-        count: tile.len(),
-        data: tile.data_mut().as_mut_ptr(),
-    }
+    let data = tile.data_mut().as_mut_ptr();
+    c_tile!(tile, data)
 }
 
 /// A tile of pixel-free samples (count requests): `len` floats at `data`.

@@ -148,11 +148,10 @@ impl Sampler {
 
     /// The per-pixel state of pixel `(x, y)`.
     #[inline]
-    pub fn pixel(&self, x: u32, y: u32, strata: &Strata) -> PixelSeed {
+    pub fn pixel(&self, x: u32, y: u32) -> PixelSeed {
         let index = (y as u64) * self.width as u64 + x as u64;
         let seed = mix(index ^ mix(self.request.wrapping_add(0x5EED)));
         let key = |d: u64| mix(seed ^ (d << 40));
-        let _ = strata;
         PixelSeed {
             x,
             y,
@@ -309,7 +308,7 @@ mod tests {
         for request in 0..4 {
             let sampler = Sampler::new(8, 8, request);
             for (px, py) in [(0, 0), (3, 5), (7, 7)] {
-                let pixel = sampler.pixel(px, py, &strata);
+                let pixel = sampler.pixel(px, py);
                 let points: Vec<[f64; 7]> = (0..spp).map(|s| sampler.pixel_sample(&pixel, &strata, s, 0x7F)).collect();
                 let frac = |p: &[f64; 7], d: usize| if d < 2 { p[d].fract() } else { p[d] };
                 for a in 0..7 {
