@@ -4,7 +4,7 @@
 set -euo pipefail
 
 # Debian packages the build and the tests need (Embree 3 for the path tracer).
-APT_PACKAGES=(build-essential pkg-config cmake libembree-dev)
+APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3-venv)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -21,9 +21,10 @@ if ! command -v cargo >/dev/null; then
     echo "setup: cargo (Rust) is required: install it with rustup, then run this again" >&2
     exit 1
 fi
-# Independent implementations the metric tests compare against.
-PIP_PACKAGES=(numpy scikit-image flip-evaluator)
-if ! python3 -c "import numpy, skimage, flip_evaluator" >/dev/null 2>&1; then
+# Independent implementations the metric tests compare against; numpy for
+# the Python SDK; mypy checks its type stubs.
+PIP_PACKAGES=(numpy scikit-image flip-evaluator mypy)
+if ! python3 -c "import numpy, skimage, flip_evaluator, mypy" >/dev/null 2>&1; then
     if ! python3 -m pip --version >/dev/null 2>&1; then
         sudo_cmd=""
         [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"

@@ -6,6 +6,7 @@
 //! `cargo build --workspace` (README's test command does it; it also builds `libfbksd.so`).
 
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 /// The directory holding the workspace's binaries (`target/<profile>`).
 pub fn bin_dir() -> PathBuf {
@@ -46,4 +47,66 @@ pub fn scene_meta(dir: &Path, name: &str, file: &str, renderer: &str, spp: &[u64
         "reference": {"method": "render", "spp": 4096}, "description": "a test scene",
     });
     std::fs::write(dir.join("fbksd-scene.json"), serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+}
+
+/// A path inside the repository's `sdk/` directory.
+pub fn sdk(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk").join(path)
+}
+
+/// Compiles a C program against the committed header and the built library.
+pub fn compile_c(sources: &[&Path], out: &Path) -> PathBuf {
+    compile("cc", &["-std=c99"], sources, out)
+}
+
+/// Compiles C++ sources against the C++ headers and the built library.
+pub fn compile_cpp(sources: &[&Path], out: &Path) -> PathBuf {
+    compile("c++", &["-std=c++14", "-I", sdk("cpp/include").to_str().unwrap()], sources, out)
+}
+
+fn compile(compiler: &str, flags: &[&str], sources: &[&Path], out: &Path) -> PathBuf {
+    let lib = bin_dir();
+    assert!(lib.join("libfbksd.so").is_file(), "libfbksd.so is missing: run `cargo build --workspace` first");
+    let status = Command::new(compiler)
+        .args(flags)
+        .args(["-Wall", "-Wextra", "-Werror", "-O2", "-pthread"])
+        .arg("-I")
+        .arg(sdk("capi/include"))
+        .args(sources)
+        .arg("-o")
+        .arg(out)
+        .arg(format!("-L{}", lib.display()))
+        .arg(format!("-Wl,-rpath,{}", lib.display()))
+        .arg("-lfbksd")
+        .status()
+        .unwrap_or_else(|e| panic!("{compiler}: {e}"));
+    assert!(status.success(), "compiling {sources:?} failed");
+    out.to_path_buf()
+}
+
+/// A `PYTHONPATH` directory holding the `fbksd` package of this checkout:
+/// its Python sources and the native module just built by cargo
+/// (`lib_native.so`), linked, so tests never run a stale `pip install`.
+pub fn python_path() -> PathBuf {
+    let native = bin_dir().join("lib_native.so");
+    assert!(native.is_file(), "{} is missing: run `cargo build --workspace` first", native.display());
+    let package = bin_dir().join("python-sdk/fbksd");
+    std::fs::create_dir_all(&package).unwrap();
+    let sources = sdk("python/python/fbksd");
+    let mut links: Vec<(PathBuf, PathBuf)> = std::fs::read_dir(&sources)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_file())
+        .map(|p| (p.clone(), package.join(p.file_name().unwrap())))
+        .collect();
+    links.push((native, package.join("_native.so")));
+    for (target, link) in links {
+        // Tests run in parallel processes: whoever links first wins, the links are identical.
+        match std::os::unix::fs::symlink(&target, &link) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+            Err(e) => panic!("linking {}: {e}", link.display()),
+        }
+    }
+    package.parent().unwrap().to_path_buf()
 }

@@ -4,49 +4,15 @@
 //! thesis's C++ examples A.1 and A.2 compile unchanged against the C++
 //! headers and run.
 
-use fbksd_tests::{analytic_scene, bin, bin_dir};
-use std::path::{Path, PathBuf};
+use fbksd_tests::{analytic_scene, bin, bin_dir, compile_c, compile_cpp, sdk};
+use std::path::Path;
 use std::process::Command;
-
-fn sdk(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk").join(path)
-}
-
-/// Compiles a C program against the committed header and the built library.
-fn compile_c(source: &Path, out: &Path) -> PathBuf {
-    compile("cc", &["-std=c99"], &[source], out)
-}
-
-/// Compiles C++ sources against the C++ headers and the built library.
-fn compile_cpp(sources: &[&Path], out: &Path) -> PathBuf {
-    compile("c++", &["-std=c++14", "-I", sdk("cpp/include").to_str().unwrap()], sources, out)
-}
-
-fn compile(compiler: &str, flags: &[&str], sources: &[&Path], out: &Path) -> PathBuf {
-    let lib = bin_dir();
-    assert!(lib.join("libfbksd.so").is_file(), "libfbksd.so is missing: run `cargo build --workspace` first");
-    let status = Command::new(compiler)
-        .args(flags)
-        .args(["-Wall", "-Wextra", "-Werror", "-O2"])
-        .arg("-I")
-        .arg(sdk("capi/include"))
-        .args(sources)
-        .arg("-o")
-        .arg(out)
-        .arg(format!("-L{}", lib.display()))
-        .arg(format!("-Wl,-rpath,{}", lib.display()))
-        .arg("-lfbksd")
-        .status()
-        .unwrap_or_else(|e| panic!("{compiler}: {e}"));
-    assert!(status.success(), "compiling {sources:?} failed");
-    out.to_path_buf()
-}
 
 #[test]
 fn a_c_box_filter_matches_the_rust_box_filter_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
     let source = sdk("capi/tests/c/box_filter.c");
-    let exe = compile_c(&source, &dir.path().join("box-filter-c"));
+    let exe = compile_c(&[&source], &dir.path().join("box-filter-c"));
     let scene = analytic_scene(dir.path(), "conformance", 40, 24);
     let results = dir.path().join("results");
     let output = Command::new(bin("fbksd"))
@@ -95,7 +61,7 @@ int main(void) {
 "#,
     )
     .unwrap();
-    let exe = compile_c(&source, &dir.path().join("errors"));
+    let exe = compile_c(&[&source], &dir.path().join("errors"));
     let output = Command::new(&exe).env_remove("FBKSD_RENDEZVOUS").output().unwrap();
     assert!(output.status.success(), "exit {:?}: {}", output.status.code(), String::from_utf8_lossy(&output.stderr));
     assert_eq!(String::from_utf8_lossy(&output.stdout).trim(), "ok");

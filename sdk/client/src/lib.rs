@@ -52,6 +52,7 @@ use fbksd_core::{rendezvous, Tile};
 use std::io::BufReader;
 use std::os::unix::net::UnixStream;
 use std::path::Path;
+use std::sync::Arc;
 
 /// A number of samples per pixel (the C++ API's `SPP`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -104,6 +105,13 @@ pub enum ClientError {
     Shm(#[from] ShmError),
 }
 
+/// Shared memory kept mapped (see [`BenchmarkClient::mappings`]).
+#[derive(Clone)]
+pub struct Mappings {
+    _result: Arc<SharedRegion>,
+    _ring: Option<Arc<Ring>>,
+}
+
 /// Connection to the benchmark manager. Create one per process.
 pub struct BenchmarkClient {
     reader: BufReader<UnixStream>,
@@ -112,8 +120,8 @@ pub struct BenchmarkClient {
     scene_info: SceneInfo,
     width: u32,
     height: u32,
-    result: SharedRegion,
-    layout: Option<(CompiledLayout, Ring)>,
+    result: Arc<SharedRegion>,
+    layout: Option<(CompiledLayout, Arc<Ring>)>,
     remaining: u64,
     debug: Option<debug::DebugManager>,
 }
@@ -166,7 +174,7 @@ impl BenchmarkClient {
             scene_info,
             width,
             height,
-            result,
+            result: Arc::new(result),
             layout: None,
             remaining,
             debug: None,
@@ -198,7 +206,7 @@ impl BenchmarkClient {
         self.send(&FromTechnique::SetLayout { layout: layout.clone() })?;
         match self.receive()? {
             ToTechnique::LayoutSet { ring, sample_size } if sample_size as usize == compiled.sample_size() => {
-                let ring = Ring::open(&self.dir, ring)?;
+                let ring = Arc::new(Ring::open(&self.dir, ring)?);
                 self.layout = Some((compiled, ring));
                 Ok(())
             }
@@ -212,6 +220,14 @@ impl BenchmarkClient {
         let n = self.width as usize * self.height as usize * 3;
         // SAFETY: the technique owns the result buffer until it sends the result.
         unsafe { self.result.floats_mut(0, n) }
+    }
+
+    /// Keeps the shared memory behind the result buffer and the tiles mapped
+    /// for as long as the handle lives, even after the client is gone.
+    /// Language bindings whose arrays view that memory (Python) hold one per
+    /// array, so a view kept too long reads stale data instead of crashing.
+    pub fn mappings(&self) -> Mappings {
+        Mappings { _result: self.result.clone(), _ring: self.layout.as_ref().map(|(_, r)| r.clone()) }
     }
 
     /// Requests `spp` samples per pixel; `consumer` sees each tile.
