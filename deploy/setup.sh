@@ -4,7 +4,9 @@
 set -euo pipefail
 
 # Debian packages the build and the tests need (Embree 3 for the path tracer).
-APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3-venv)
+APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3-venv
+    # OpenCV headers: the thesis metric example A.3 is compiled by the tests.
+    libopencv-core-dev libopencv-imgproc-dev libopencv-highgui-dev)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do

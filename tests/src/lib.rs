@@ -61,14 +61,24 @@ pub fn compile_c(sources: &[&Path], out: &Path) -> PathBuf {
 
 /// Compiles C++ sources against the C++ headers and the built library.
 pub fn compile_cpp(sources: &[&Path], out: &Path) -> PathBuf {
-    compile("c++", &["-std=c++14", "-I", sdk("cpp/include").to_str().unwrap()], sources, out)
+    compile_cpp_with(sources, out, &[])
+}
+
+/// [`compile_cpp`] with extra compiler flags.
+pub fn compile_cpp_with(sources: &[&Path], out: &Path, extra: &[&str]) -> PathBuf {
+    let include = sdk("cpp/include");
+    let mut flags = vec!["-std=c++14", "-I", include.to_str().unwrap()];
+    flags.extend_from_slice(extra);
+    compile("c++", &flags, sources, out)
 }
 
 fn compile(compiler: &str, flags: &[&str], sources: &[&Path], out: &Path) -> PathBuf {
     let lib = bin_dir();
     assert!(lib.join("libfbksd.so").is_file(), "libfbksd.so is missing: run `cargo build --workspace` first");
+    // Libraries must follow the sources that use them.
+    let (libs, flags): (Vec<&str>, Vec<&str>) = flags.iter().partition(|f| f.starts_with("-l"));
     let status = Command::new(compiler)
-        .args(flags)
+        .args(&flags)
         .args(["-Wall", "-Wextra", "-Werror", "-O2", "-pthread"])
         .arg("-I")
         .arg(sdk("capi/include"))
@@ -78,6 +88,7 @@ fn compile(compiler: &str, flags: &[&str], sources: &[&Path], out: &Path) -> Pat
         .arg(format!("-L{}", lib.display()))
         .arg(format!("-Wl,-rpath,{}", lib.display()))
         .arg("-lfbksd")
+        .args(&libs)
         .status()
         .unwrap_or_else(|e| panic!("{compiler}: {e}"));
     assert!(status.success(), "compiling {sources:?} failed");

@@ -9,7 +9,7 @@ fn generate() -> String {
         language: cbindgen::Language::C,
         include_guard: Some("FBKSD_H".into()),
         header: Some(
-            "/* The FBKSD C API (technique side). Generated from sdk/capi/src/lib.rs by cbindgen: do not edit. */"
+            "/* The FBKSD C API (techniques, renderers, metrics). Generated from sdk/capi/src by cbindgen: do not edit. */"
                 .into(),
         ),
         documentation: true,

@@ -6,17 +6,24 @@
 # A technique's CMakeLists.txt needs only:
 #   find_package(fbksd REQUIRED)
 #   target_link_libraries(my-technique fbksd::client)
+# Renderers link fbksd::renderer, metric programs fbksd::iqa (one library,
+# three names, as in the original package).
 get_filename_component(_fbksd_prefix "${CMAKE_CURRENT_LIST_DIR}/../../.." ABSOLUTE)
 if(NOT EXISTS "${_fbksd_prefix}/lib/libfbksd.so")
     set(fbksd_FOUND FALSE)
     set(fbksd_NOT_FOUND_MESSAGE "${_fbksd_prefix}/lib/libfbksd.so is missing: reinstall with deploy/install-sdk.sh")
     return()
 endif()
-if(NOT TARGET fbksd::client)
-    add_library(fbksd::client SHARED IMPORTED)
-    set_target_properties(fbksd::client PROPERTIES
-        IMPORTED_LOCATION "${_fbksd_prefix}/lib/libfbksd.so"
-        INTERFACE_INCLUDE_DIRECTORIES "${_fbksd_prefix}/include"
-        INTERFACE_COMPILE_FEATURES cxx_std_14)
-endif()
+include(CMakeFindDependencyMacro)
+find_dependency(Threads)
+foreach(_fbksd_target client renderer iqa)
+    if(NOT TARGET fbksd::${_fbksd_target})
+        add_library(fbksd::${_fbksd_target} SHARED IMPORTED)
+        set_target_properties(fbksd::${_fbksd_target} PROPERTIES
+            IMPORTED_LOCATION "${_fbksd_prefix}/lib/libfbksd.so"
+            INTERFACE_INCLUDE_DIRECTORIES "${_fbksd_prefix}/include"
+            INTERFACE_LINK_LIBRARIES Threads::Threads
+            INTERFACE_COMPILE_FEATURES cxx_std_14)
+    endif()
+endforeach()
 set(fbksd_FOUND TRUE)

@@ -3,7 +3,8 @@
 //! `{"acronym", "name", "reference", "lower_is_better", "has_error_map",
 //! "executable"}` — and the executable, called as
 //! `<exe> [--map-file map.png] <reference.exr> <test.exr>`; it prints its
-//! value on stdout as a JSON number or an object with a `"value"` field.
+//! value on stdout as a JSON number, an object with a `"value"` field, or
+//! the original's `{"<acronym>": value}`.
 //! `fbksd iqa <METRIC>` exposes the built-in metrics the same way.
 
 use crate::{IqaError, MetricInfo};
@@ -109,11 +110,13 @@ impl ExternalMetric {
     }
 }
 
-/// A value printed by a metric: a JSON number, or an object with `"value"`.
+/// A value printed by a metric: a JSON number, an object with `"value"`,
+/// or the original format `{"<acronym>": value}` (one key).
 pub fn parse_value(stdout: &str) -> Option<f64> {
     let v: serde_json::Value = serde_json::from_str(stdout.trim()).ok()?;
     match v {
         serde_json::Value::Number(n) => n.as_f64(),
+        serde_json::Value::Object(o) if o.len() == 1 => o.values().next()?.as_f64(),
         serde_json::Value::Object(o) => o.get("value")?.as_f64(),
         _ => None,
     }
@@ -127,7 +130,9 @@ mod tests {
     fn values_are_numbers_or_objects() {
         assert_eq!(parse_value("0.25\n"), Some(0.25));
         assert_eq!(parse_value(r#"{"value": 3, "extra": 1}"#), Some(3.0));
+        assert_eq!(parse_value(r#"{"My-MSE": 0.5}"#), Some(0.5), "the original format");
         assert_eq!(parse_value("nope"), None);
-        assert_eq!(parse_value(r#"{"v": 1}"#), None);
+        assert_eq!(parse_value(r#"{"v": 1, "w": 2}"#), None);
+        assert_eq!(parse_value(r#"{"v": "one"}"#), None);
     }
 }

@@ -37,9 +37,10 @@ int main(int argc, char **argv) {
     FbksdClient *client = NULL;
     CHECK(fbksd_client_new(argc, (const char *const *)argv, &client));
     int64_t width, height, spp;
-    CHECK(fbksd_scene_info_int(client, "width", &width));
-    CHECK(fbksd_scene_info_int(client, "height", &height));
-    CHECK(fbksd_scene_info_int(client, "max_spp", &spp));
+    const FbksdSceneInfo *info = fbksd_client_scene_info(client);
+    CHECK(fbksd_scene_info_int(info, "width", &width));
+    CHECK(fbksd_scene_info_int(info, "height", &height));
+    CHECK(fbksd_scene_info_int(info, "max_spp", &spp));
 
     FbksdLayout *layout = fbksd_layout_new();
     CHECK(fbksd_layout_add(layout, "COLOR_R", false, 0));
