@@ -97,30 +97,39 @@ fn the_thesis_cpp_examples_compile_unchanged_and_run() {
     }
 }
 
-#[test]
-fn a_cpp_technique_builds_with_find_package_and_matches_the_rust_box_filter() {
-    let dir = tempfile::tempdir().unwrap();
+/// Installs the SDK as a user would (deploy/install-sdk.sh) and builds a
+/// submission repository with CMake; returns the build directory.
+fn build_with_cmake(repository: &str, dir: &Path) -> std::path::PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let prefix = dir.path().join("sdk");
-    let run = |cmd: &mut Command| {
-        let out = cmd.output().unwrap();
-        assert!(
-            out.status.success(),
-            "{cmd:?}: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
-    // Install the SDK as a user would, then build the submission repository with CMake.
-    run(Command::new("bash").arg(root.join("deploy/install-sdk.sh")).arg(&prefix).arg(bin_dir()));
-    let build = dir.path().join("build");
+    let prefix = dir.join("sdk");
+    if !prefix.join("lib/cmake/fbksd").is_dir() {
+        run(Command::new("bash").arg(root.join("deploy/install-sdk.sh")).arg(&prefix).arg(bin_dir()));
+    }
+    let build = dir.join(format!("build-{repository}"));
     run(Command::new("cmake")
         .arg("-S")
-        .arg(root.join("sdk/techniques/box-filter-cpp"))
+        .arg(root.join("sdk/techniques").join(repository))
         .arg("-B")
         .arg(&build)
         .arg(format!("-DCMAKE_PREFIX_PATH={}", prefix.display())));
     run(Command::new("cmake").arg("--build").arg(&build));
+    build
+}
+
+fn run(cmd: &mut Command) {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn a_cpp_technique_builds_with_find_package_and_matches_the_rust_box_filter() {
+    let dir = tempfile::tempdir().unwrap();
+    let build = build_with_cmake("box-filter-cpp", dir.path());
     let scene = analytic_scene(dir.path(), "cmake", 33, 17);
     let results = dir.path().join("results");
     run(Command::new(bin("fbksd"))
@@ -130,4 +139,32 @@ fn a_cpp_technique_builds_with_find_package_and_matches_the_rust_box_filter() {
         .args(["--spp", "5", "--results", results.to_str().unwrap()]));
     let read = |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/cmake/5_0.exr"))).unwrap().2;
     assert_eq!(read("rust"), read("cpp"));
+}
+
+#[test]
+fn the_cpp_stratified_sampler_places_every_sample_itself_within_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let build = build_with_cmake("stratified-cpp", dir.path());
+    let scene = analytic_scene(dir.path(), "stratified", 29, 13);
+    let results = dir.path().join("results");
+    run(Command::new(bin("fbksd"))
+        .args(["run", "-t", &format!("box={}", bin("box-filter"))])
+        .args(["-t", &format!("stratified={}", build.join("stratified").display())])
+        .args(["-r", &bin("fbksd-analytic-renderer"), "-s", scene.to_str().unwrap()])
+        .args(["--spp", "3,16", "--results", results.to_str().unwrap()]));
+    for spp in [3u64, 16] {
+        let log: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(results.join(format!("stratified/stratified/{spp}_0_log.json"))).unwrap(),
+        )
+        .unwrap();
+        // The sampler checks that every sample came back inside its own pixel (it throws otherwise).
+        assert_eq!(log["status"], "ok", "{log}");
+        assert_eq!(log["used_samples"], spp * 29 * 13);
+        let read =
+            |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/stratified/{spp}_0.exr"))).unwrap().2;
+        let (own, renderer) = (read("stratified"), read("box"));
+        let mean = |v: &[f32]| v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64;
+        // Both estimate the same image: their means agree to a few percent.
+        assert!((mean(&own) - mean(&renderer)).abs() < 0.05 * mean(&renderer).abs(), "{spp} spp");
+    }
 }

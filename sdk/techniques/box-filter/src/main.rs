@@ -29,16 +29,19 @@ fn main() -> anyhow::Result<()> {
 
     // STEP 3: request the whole budget and sum each pixel's samples.
     let mut sums = vec![0f64; width * height * 3];
+    let size = client.sample_size();
     client.evaluate_samples(Spp(spp), |tile| {
-        for y in tile.begin_y()..tile.end_y() {
-            for x in tile.begin_x()..tile.end_x() {
-                let pixel = &mut sums[(y as usize * width + x as usize) * 3..][..3];
-                for s in 0..tile.spp() {
-                    let sample = tile.sample(x, y, s);
-                    pixel[0] += sample[0] as f64;
-                    pixel[1] += sample[1] as f64;
-                    pixel[2] += sample[2] as f64;
-                }
+        // A tile's samples are stored pixel by pixel, each pixel's samples
+        // together: walk them in storage order.
+        let tile_width = (tile.end_x() - tile.begin_x()) as usize;
+        let per_pixel = tile.spp() as usize * size;
+        for (i, samples) in tile.data().chunks_exact(per_pixel).enumerate() {
+            let (x, y) = (tile.begin_x() as usize + i % tile_width, tile.begin_y() as usize + i / tile_width);
+            let pixel = &mut sums[(y * width + x) * 3..][..3];
+            for sample in samples.chunks_exact(size) {
+                pixel[0] += sample[0] as f64;
+                pixel[1] += sample[1] as f64;
+                pixel[2] += sample[2] as f64;
             }
         }
     })?;
