@@ -2,10 +2,12 @@
 // technique writes the position of every sample (INPUT random parameters)
 // and the renderer only evaluates them.
 //
-// Per pixel with n samples: the image position is a jittered grid when n is
-// a square (k × k cells, one sample each), otherwise N-rooks (n rows and n
-// columns, one sample in each, columns shuffled); lens (u, v) and time are
-// Latin hypercube samples, each dimension shuffled independently. Random
+// Per pixel with n samples: the image position is multi-jittered (Chiu,
+// Shirley and Wang 1994) when n is a square — one sample per cell of a
+// k × k grid and, at once, one per column and per row of the n × n grid, so
+// both 1D projections are stratified too — otherwise N-rooks (one sample
+// per row and per column of the n × n grid); lens (u, v) and time are Latin
+// hypercube samples, each dimension shuffled independently. Random
 // numbers come from a counter-based hash of (pixel, request, dimension), so
 // a run is reproducible and tiles can arrive in any order.
 #include <fbksd/client/BenchmarkClient.h>
@@ -86,7 +88,7 @@ int main(int argc, char* argv[])
 
     const auto n = (uint32_t)spp;
     const auto k = (uint32_t)std::lround(std::sqrt((double)n));
-    const bool grid = k * k == n;
+    const bool grid = k * k == n; // multi-jittered; N-rooks otherwise
     std::vector<double> sums(w * h * 3, 0.0);
 
     client.evaluateInputSamples(
@@ -95,16 +97,32 @@ int main(int argc, char* argv[])
             for (auto y = tile.beginY(); y < tile.endY(); ++y)
                 for (auto x = tile.beginX(); x < tile.endX(); ++x) {
                     Stream image(x, y, 0), lens(x, y, 1), time(x, y, 2);
-                    std::vector<uint32_t> columns = permutation(n, image);
+                    // Fine position of each sample: sub-column (x) and sub-row (y).
+                    std::vector<uint32_t> fineX(n), fineY(n);
+                    if (grid) {
+                        // Sample s sits in cell (s % k, s / k); within each cell
+                        // column the sub-columns are a permutation, likewise rows.
+                        for (uint32_t column = 0; column < k; ++column) {
+                            std::vector<uint32_t> p = permutation(k, image);
+                            for (uint32_t row = 0; row < k; ++row)
+                                fineX[row * k + column] = column * k + p[row];
+                        }
+                        for (uint32_t row = 0; row < k; ++row) {
+                            std::vector<uint32_t> p = permutation(k, image);
+                            for (uint32_t column = 0; column < k; ++column)
+                                fineY[row * k + column] = row * k + p[column];
+                        }
+                    } else {
+                        fineX = permutation(n, image);
+                        for (uint32_t s = 0; s < n; ++s)
+                            fineY[s] = s;
+                    }
                     std::vector<float> u = latinHypercube(n, lens), v = latinHypercube(n, lens);
                     std::vector<float> t = latinHypercube(n, time);
                     for (uint32_t s = 0; s < n; ++s) {
                         float* sample = tile(x, y, s);
-                        float cx = grid ? (float)(s % k) : (float)columns[s];
-                        float cy = grid ? (float)(s / k) : (float)s;
-                        float cells = grid ? (float)k : (float)n;
-                        sample[X] = within(x, (cx + image.next()) / cells);
-                        sample[Y] = within(y, (cy + image.next()) / cells);
+                        sample[X] = within(x, ((float)fineX[s] + image.next()) / (float)n);
+                        sample[Y] = within(y, ((float)fineY[s] + image.next()) / (float)n);
                         sample[U] = u[s];
                         sample[V] = v[s];
                         sample[T] = t[s];
