@@ -123,6 +123,9 @@ struct Current {
     width: u32,
     height: u32,
     expected: u64,
+    /// Samples in pipes opened so far (closed or not).
+    reserved: u64,
+    /// Samples in closed pipes.
     delivered: u64,
     open: u64,
 }
@@ -202,7 +205,8 @@ fn serve_request(
 ) -> Result<(), BoxError> {
     let (width, height) = (eval.width(), eval.height());
     let expected = eval.spp * width as u64 * height as u64 + eval.remaining;
-    *CURRENT.lock().unwrap() = Some(Current { eval, spp: eval.spp, width, height, expected, delivered: 0, open: 0 });
+    *CURRENT.lock().unwrap() =
+        Some(Current { eval, spp: eval.spp, width, height, expected, reserved: 0, delivered: 0, open: 0 });
     // Whatever happens below, `eval` must not be reachable once we return.
     struct Clear;
     impl Drop for Clear {
@@ -232,13 +236,9 @@ fn serve_request(
         }
         current = PROGRESS.wait(current).unwrap();
     }
-    let delivered = current.as_ref().map_or(0, |c| c.delivered);
     drop(current);
     if status != FbksdStatus::Ok {
         return Err(format!("the evaluate callback failed: {}", last_error()).into());
-    }
-    if delivered > expected {
-        return Err(format!("the renderer produced {delivered} samples for a request of {expected}").into());
     }
     if let Some(f) = last_tile_consumed {
         f(user.0);
@@ -285,14 +285,15 @@ pub extern "C" fn fbksd_pipe_open(
             } else {
                 Tile::Samples { count: num_samples as u64 }
             };
-            if c.delivered + tile.sample_count() > c.expected {
+            if c.reserved + tile.sample_count() > c.expected {
                 return Err(usage(format!(
-                    "a pipe of {} samples exceeds the request: {} of {} already delivered",
+                    "a pipe of {} samples exceeds the request: {} of its {} samples are already in pipes",
                     tile.sample_count(),
-                    c.delivered,
+                    c.reserved,
                     c.expected
                 )));
             }
+            c.reserved += tile.sample_count();
             c.open += 1;
             (c.eval, tile)
         };
@@ -304,6 +305,9 @@ pub extern "C" fn fbksd_pipe_open(
         let mut pipe = match opened {
             Ok(p) => p,
             Err(e) => {
+                if let Some(c) = CURRENT.lock().unwrap_or_else(|p| p.into_inner()).as_mut() {
+                    c.reserved -= tile.sample_count();
+                }
                 close_one(0);
                 return Err((FbksdStatus::Failed, format!("opening a pipe: {e}")));
             }
