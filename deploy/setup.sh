@@ -6,7 +6,9 @@ set -euo pipefail
 # Debian packages the build and the tests need (Embree 3 for the path tracer).
 APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3-venv
     # OpenCV headers: the thesis metric example A.3 is compiled by the tests.
-    libopencv-core-dev libopencv-imgproc-dev libopencv-highgui-dev)
+    libopencv-core-dev libopencv-imgproc-dev libopencv-highgui-dev
+    # fbksd-server: TLS for SMTP; PostgreSQL for its tests (and deployments).
+    libssl-dev postgresql)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -45,3 +47,21 @@ fi
 
 # The procedurally authored parts of the production scene pool (deterministic, a second or two).
 python3 "$(dirname "$0")/../scenes/production/generate.py"
+
+# A PostgreSQL server for the fbksd-server tests: 127.0.0.1:54329, trust
+# authentication, data in /var/tmp/fbksd-test-postgres (each test creates
+# its own database). PostgreSQL refuses to run as root: root runs it as the
+# postgres user.
+PG_PORT=54329
+PG_DIR=${FBKSD_TEST_PG_DIR:-/var/tmp/fbksd-test-postgres}
+if ! pg_isready -q -h 127.0.0.1 -p "$PG_PORT"; then
+    pg_bin=$(ls -d /usr/lib/postgresql/*/bin | sort -V | tail -1)
+    as_pg() { if [ "$(id -u)" -eq 0 ]; then runuser -u postgres -- "$@"; else "$@"; fi; }
+    if [ ! -f "$PG_DIR/PG_VERSION" ]; then
+        mkdir -p "$PG_DIR"
+        [ "$(id -u)" -eq 0 ] && chown postgres: "$PG_DIR"
+        as_pg "$pg_bin/initdb" -D "$PG_DIR" -U postgres --auth=trust >/dev/null
+    fi
+    as_pg "$pg_bin/pg_ctl" -D "$PG_DIR" -l "$PG_DIR/server.log" -w \
+        -o "-p $PG_PORT -k $PG_DIR -c listen_addresses=127.0.0.1" start >/dev/null
+fi

@@ -1,0 +1,295 @@
+//! Accounts (thesis §5.2): e-mail addresses and passwords parsed at the
+//! boundary, argon2 password hashes, one-time e-mail tokens, and browser
+//! sessions with their CSRF token. Only SHA-256 digests of tokens are
+//! stored, so a leaked database opens no session.
+
+use crate::error::ApiError;
+use crate::now_ms;
+use argon2::password_hash::{rand_core::OsRng, PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
+use argon2::Argon2;
+use axum::http::StatusCode;
+use rand::RngCore;
+use sha2::{Digest, Sha256};
+use sqlx::{AnyPool, Row};
+
+/// A valid, normalised (trimmed, lower-case) e-mail address.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Email(String);
+
+impl Email {
+    /// Parses an address: one `@`, a dot in the domain, no spaces, at most 254 bytes.
+    pub fn parse(text: &str) -> Result<Email, ApiError> {
+        let email = text.trim().to_lowercase();
+        let bad =
+            |why: &str| ApiError::bad_request("invalid_email", format!("{email:?} is not an e-mail address: {why}"));
+        if email.len() > 254 {
+            return Err(bad("longer than 254 characters"));
+        }
+        if email.chars().any(|c| c.is_whitespace() || c.is_control()) {
+            return Err(bad("it contains spaces"));
+        }
+        let Some((local, domain)) = email.split_once('@') else { return Err(bad("no @")) };
+        if local.is_empty()
+            || domain.contains('@')
+            || !domain.contains('.')
+            || domain.starts_with('.')
+            || domain.ends_with('.')
+        {
+            return Err(bad("expected name@domain.tld"));
+        }
+        Ok(Email(email))
+    }
+    /// The address.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+/// A password good enough to accept: 10 to 1024 characters.
+pub struct Password(String);
+
+impl Password {
+    /// Checks the length rules.
+    pub fn parse(text: &str) -> Result<Password, ApiError> {
+        let n = text.chars().count();
+        if n < 10 {
+            return Err(ApiError::bad_request("weak_password", "the password needs at least 10 characters"));
+        }
+        if n > 1024 {
+            return Err(ApiError::bad_request("invalid_password", "the password is longer than 1024 characters"));
+        }
+        Ok(Password(text.to_string()))
+    }
+
+    fn hash(&self) -> Result<String, ApiError> {
+        let salt = SaltString::generate(&mut OsRng);
+        Argon2::default().hash_password(self.0.as_bytes(), &salt).map(|h| h.to_string()).map_err(ApiError::internal)
+    }
+}
+
+/// Whether `password` matches the stored argon2 `hash`.
+fn password_matches(password: &str, hash: &str) -> bool {
+    PasswordHash::new(hash).is_ok_and(|h| Argon2::default().verify_password(password.as_bytes(), &h).is_ok())
+}
+
+/// A random token (256 bits, hex).
+pub fn random_token() -> String {
+    let mut bytes = [0u8; 32];
+    rand::rng().fill_bytes(&mut bytes);
+    hex(&bytes)
+}
+
+/// SHA-256 of a token, hex: what the database keeps.
+pub fn digest(token: &str) -> String {
+    hex(&Sha256::digest(token.as_bytes()))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// A user as the rest of the server sees one.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct User {
+    /// Random id.
+    pub id: String,
+    /// Normalised e-mail address.
+    pub email: String,
+    /// Whether the address was verified.
+    pub verified: bool,
+    /// Whether the user administers the server.
+    pub is_admin: bool,
+}
+
+fn user_of(row: &sqlx::any::AnyRow) -> Result<User, sqlx::Error> {
+    Ok(User {
+        id: row.try_get("id")?,
+        email: row.try_get("email")?,
+        verified: row.try_get::<i64, _>("verified")? != 0,
+        is_admin: row.try_get::<i64, _>("is_admin")? != 0,
+    })
+}
+
+/// Creates an account; `verified` accounts skip the e-mail step (the
+/// bootstrap administrator). A taken address is a 409.
+pub async fn create_user(
+    pool: &AnyPool,
+    email: &Email,
+    password: &Password,
+    verified: bool,
+    is_admin: bool,
+) -> Result<User, ApiError> {
+    let id = uuid::Uuid::new_v4().to_string();
+    let hash = password.hash()?;
+    let inserted = sqlx::query(
+        "INSERT INTO users (id, email, password_hash, verified, is_admin, created_at) VALUES ($1, $2, $3, $4, $5, $6)",
+    )
+    .bind(&id)
+    .bind(email.as_str())
+    .bind(&hash)
+    .bind(verified as i64)
+    .bind(is_admin as i64)
+    .bind(now_ms())
+    .execute(pool)
+    .await;
+    match inserted {
+        Ok(_) => Ok(User { id, email: email.as_str().to_string(), verified, is_admin }),
+        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "email_taken",
+            format!("an account with {} exists: log in, or reset its password", email.as_str()),
+        )),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Whether any administrator exists.
+pub async fn has_admin(pool: &AnyPool) -> Result<bool, sqlx::Error> {
+    let row = sqlx::query("SELECT COUNT(*) AS n FROM users WHERE is_admin = 1").fetch_one(pool).await?;
+    Ok(row.try_get::<i64, _>("n")? > 0)
+}
+
+/// How long an e-mail token is valid.
+const EMAIL_TOKEN_MS: i64 = 48 * 3600 * 1000;
+
+/// Stores a new one-time token for `purpose` and returns it (to be mailed).
+pub async fn issue_email_token(pool: &AnyPool, user_id: &str, purpose: &str) -> Result<String, sqlx::Error> {
+    let token = random_token();
+    sqlx::query("INSERT INTO email_tokens (token_hash, user_id, purpose, expires_at) VALUES ($1, $2, $3, $4)")
+        .bind(digest(&token))
+        .bind(user_id)
+        .bind(purpose)
+        .bind(now_ms() + EMAIL_TOKEN_MS)
+        .execute(pool)
+        .await?;
+    Ok(token)
+}
+
+/// Uses a one-time token: returns its user, or an error saying it is
+/// unknown, used or expired.
+pub async fn redeem_email_token(pool: &AnyPool, token: &str, purpose: &str) -> Result<String, ApiError> {
+    let invalid =
+        || ApiError::bad_request("invalid_token", "this link is unknown, already used or expired: ask for a new one");
+    let mut tx = pool.begin().await?;
+    let row = sqlx::query("SELECT user_id, expires_at, used FROM email_tokens WHERE token_hash = $1 AND purpose = $2")
+        .bind(digest(token))
+        .bind(purpose)
+        .fetch_optional(&mut *tx)
+        .await?
+        .ok_or_else(invalid)?;
+    if row.try_get::<i64, _>("used")? != 0 || row.try_get::<i64, _>("expires_at")? < now_ms() {
+        return Err(invalid());
+    }
+    let user_id: String = row.try_get("user_id")?;
+    sqlx::query("UPDATE email_tokens SET used = 1 WHERE token_hash = $1").bind(digest(token)).execute(&mut *tx).await?;
+    tx.commit().await?;
+    Ok(user_id)
+}
+
+/// Marks a user's address verified.
+pub async fn mark_verified(pool: &AnyPool, user_id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE users SET verified = 1 WHERE id = $1").bind(user_id).execute(pool).await?;
+    Ok(())
+}
+
+/// The user with these credentials; one message for an unknown address and
+/// a wrong password, so it does not tell which addresses exist.
+pub async fn authenticate(pool: &AnyPool, email: &str, password: &str) -> Result<User, ApiError> {
+    let wrong = || ApiError::unauthorized("wrong e-mail address or password");
+    let email = Email::parse(email).map_err(|_| wrong())?;
+    let row = sqlx::query("SELECT id, email, password_hash, verified, is_admin FROM users WHERE email = $1")
+        .bind(email.as_str())
+        .fetch_optional(pool)
+        .await?
+        .ok_or_else(wrong)?;
+    let hash: String = row.try_get("password_hash")?;
+    if !password_matches(password, &hash) {
+        return Err(wrong());
+    }
+    let user = user_of(&row)?;
+    if !user.verified {
+        return Err(ApiError::forbidden(
+            "email_not_verified",
+            "verify your e-mail address first: follow the link we sent you",
+        ));
+    }
+    Ok(user)
+}
+
+/// A browser session: the cookie's token and the CSRF token to echo.
+pub struct NewSession {
+    /// Goes into the session cookie.
+    pub token: String,
+    /// Must accompany every state-changing request of this session.
+    pub csrf_token: String,
+}
+
+/// Opens a session for `user_id` lasting `hours`.
+pub async fn open_session(pool: &AnyPool, user_id: &str, hours: u64) -> Result<NewSession, sqlx::Error> {
+    let (token, csrf_token) = (random_token(), random_token());
+    let now = now_ms();
+    sqlx::query(
+        "INSERT INTO sessions (token_hash, user_id, csrf_token, created_at, expires_at) VALUES ($1, $2, $3, $4, $5)",
+    )
+    .bind(digest(&token))
+    .bind(user_id)
+    .bind(&csrf_token)
+    .bind(now)
+    .bind(now + hours as i64 * 3600 * 1000)
+    .execute(pool)
+    .await?;
+    Ok(NewSession { token, csrf_token })
+}
+
+/// The user and CSRF token of a live session.
+pub async fn session_user(pool: &AnyPool, token: &str) -> Result<Option<(User, String)>, sqlx::Error> {
+    let row = sqlx::query(
+        "SELECT u.id, u.email, u.verified, u.is_admin, s.csrf_token FROM sessions s JOIN users u ON u.id = s.user_id \
+         WHERE s.token_hash = $1 AND s.expires_at > $2",
+    )
+    .bind(digest(token))
+    .bind(now_ms())
+    .fetch_optional(pool)
+    .await?;
+    row.map(|r| Ok((user_of(&r)?, r.try_get("csrf_token")?))).transpose()
+}
+
+/// Ends a session.
+pub async fn close_session(pool: &AnyPool, token: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("DELETE FROM sessions WHERE token_hash = $1").bind(digest(token)).execute(pool).await?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn email_addresses_are_normalised_or_refused() {
+        assert_eq!(Email::parse("  Ada@Example.ORG ").unwrap().as_str(), "ada@example.org");
+        for bad in ["", "ada", "ada@", "@example.org", "ada@example", "a da@example.org", "a@b@c.org", "ada@.org"] {
+            let e = Email::parse(bad).unwrap_err();
+            assert_eq!(e.code, "invalid_email", "{bad:?}");
+        }
+        assert!(Email::parse(&format!("{}@example.org", "a".repeat(250))).is_err());
+    }
+
+    #[test]
+    fn passwords_need_ten_characters_and_hash_with_argon2() {
+        assert_eq!(Password::parse("short").err().unwrap().code, "weak_password");
+        let p = Password::parse("correct horse battery").unwrap();
+        let hash = p.hash().unwrap();
+        assert!(hash.starts_with("$argon2"));
+        assert!(password_matches("correct horse battery", &hash));
+        assert!(!password_matches("correct horse battery!", &hash));
+    }
+
+    #[test]
+    fn tokens_are_random_and_stored_as_digests() {
+        let (a, b) = (random_token(), random_token());
+        assert_ne!(a, b);
+        assert_eq!(a.len(), 64);
+        assert_ne!(digest(&a), a);
+        assert_eq!(digest(&a), digest(&a));
+    }
+}

@@ -1,0 +1,118 @@
+//! Configuration in layers: built-in defaults, then an optional TOML file,
+//! then environment variables `FBKSD_SERVER_<KEY>` (for example
+//! `FBKSD_SERVER_DATABASE_URL`, `FBKSD_SERVER_SMTP_URL`). With nothing set
+//! the server listens on 127.0.0.1:8096 and keeps everything in
+//! `./fbksd-data` (SQLite database, mail outbox).
+
+use figment::providers::{Env, Format, Serialized, Toml};
+use figment::Figment;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A secret that never prints (database URLs with passwords, SMTP credentials).
+#[derive(Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(transparent)]
+pub struct Secret(pub String);
+
+impl fmt::Debug for Secret {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(if self.0.is_empty() { "\"\"" } else { "\"[redacted]\"" })
+    }
+}
+
+/// The server's configuration.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Address to listen on (`host:port`; port 0 picks a free one).
+    pub bind: String,
+    /// Where the server keeps its data: the SQLite database, the mail
+    /// outbox, git repositories and results.
+    pub data_dir: PathBuf,
+    /// `sqlite://…` or `postgres://…`; empty means SQLite in `data_dir`.
+    pub database_url: Secret,
+    /// The URL users reach the server at, for links in e-mails; empty
+    /// means `http://<bind>`.
+    pub public_url: String,
+    /// `smtp://user:password@host:port` (STARTTLS) or `smtps://…`; empty
+    /// means the file outbox `data_dir/outbox`.
+    pub smtp_url: Secret,
+    /// Sender of the server's e-mails.
+    pub mail_from: String,
+    /// How long a browser session lasts, in hours.
+    pub session_hours: u64,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            bind: "127.0.0.1:8096".into(),
+            data_dir: PathBuf::from("fbksd-data"),
+            database_url: Secret::default(),
+            public_url: String::new(),
+            smtp_url: Secret::default(),
+            mail_from: "FBKSD <fbksd@localhost>".into(),
+            session_hours: 24 * 14,
+        }
+    }
+}
+
+/// A configuration that cannot be used; the message says which key and why.
+#[derive(Debug, thiserror::Error)]
+#[error("configuration: {0}")]
+pub struct ConfigError(String);
+
+impl Config {
+    /// Defaults, then `file` (if given; it must exist), then the environment.
+    pub fn load(file: Option<&Path>) -> Result<Config, ConfigError> {
+        let mut figment = Figment::from(Serialized::defaults(Config::default()));
+        if let Some(file) = file {
+            if !file.is_file() {
+                return Err(ConfigError(format!("{} does not exist", file.display())));
+            }
+            figment = figment.merge(Toml::file(file));
+        }
+        figment = figment.merge(Env::prefixed("FBKSD_SERVER_"));
+        figment.extract().map_err(|e| ConfigError(e.to_string()))
+    }
+
+    /// The database URL to use: the configured one, or SQLite in `data_dir`.
+    pub fn database_url(&self) -> String {
+        if self.database_url.0.is_empty() {
+            format!("sqlite://{}?mode=rwc", self.data_dir.join("fbksd.sqlite3").display())
+        } else {
+            self.database_url.0.clone()
+        }
+    }
+
+    /// The mail outbox directory (used when no SMTP URL is set).
+    pub fn outbox_dir(&self) -> PathBuf {
+        self.data_dir.join("outbox")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn secrets_never_print() {
+        let config = Config { database_url: Secret("postgres://u:hunter2@db/fbksd".into()), ..Config::default() };
+        assert!(!format!("{config:?}").contains("hunter2"));
+    }
+
+    #[test]
+    fn a_file_overrides_defaults_and_unknown_keys_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("server.toml");
+        std::fs::write(&file, "bind = \"0.0.0.0:9000\"\n").unwrap();
+        let config = Config::load(Some(&file)).unwrap();
+        assert_eq!(config.bind, "0.0.0.0:9000");
+        assert_eq!(config.session_hours, 24 * 14);
+        std::fs::write(&file, "bnid = \"0.0.0.0:9000\"\n").unwrap();
+        let error = Config::load(Some(&file)).unwrap_err().to_string();
+        assert!(error.contains("bnid"), "{error}");
+        assert!(Config::load(Some(&dir.path().join("missing.toml"))).is_err());
+    }
+}

@@ -1,0 +1,32 @@
+//! `fbksd-server [--config server.toml]`: starts the FBKSD service. With no
+//! configuration it serves http://127.0.0.1:8096 with SQLite and a mail
+//! outbox in ./fbksd-data, and prints the first administrator's one-time
+//! password.
+
+use clap::Parser;
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(version, about = "The FBKSD online service")]
+struct Args {
+    /// A TOML configuration file (environment variables FBKSD_SERVER_* override it).
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .init();
+    let args = Args::parse();
+    let config = fbksd_server::config::Config::load(args.config.as_deref())?;
+    let data_dir = config.data_dir.clone();
+    let app = fbksd_server::Application::build(config).await?;
+    println!("FBKSD server: {} (data in {})", app.url(), data_dir.display());
+    if let Some((email, password)) = app.admin_credentials() {
+        println!("administrator created: {email} / {password} (shown once: change it after logging in)");
+    }
+    app.run().await?;
+    Ok(())
+}
