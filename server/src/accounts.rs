@@ -260,6 +260,130 @@ pub async fn close_session(pool: &AnyPool, token: &str) -> Result<(), sqlx::Erro
     Ok(())
 }
 
+/// Sets a new password and ends every session of the user.
+pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) -> Result<(), ApiError> {
+    let hash = password.hash()?;
+    let mut tx = pool.begin().await?;
+    sqlx::query("UPDATE users SET password_hash = $1 WHERE id = $2")
+        .bind(&hash)
+        .bind(user_id)
+        .execute(&mut *tx)
+        .await?;
+    sqlx::query("DELETE FROM sessions WHERE user_id = $1").bind(user_id).execute(&mut *tx).await?;
+    tx.commit().await?;
+    Ok(())
+}
+
+/// Checks a user's current password (for changes that need it).
+pub async fn check_password(pool: &AnyPool, user_id: &str, password: &str) -> Result<(), ApiError> {
+    let row = sqlx::query("SELECT password_hash FROM users WHERE id = $1").bind(user_id).fetch_one(pool).await?;
+    if password_matches(password, &row.try_get::<String, _>("password_hash")?) {
+        Ok(())
+    } else {
+        Err(ApiError::forbidden("wrong_password", "the current password is wrong"))
+    }
+}
+
+/// The id of the user with this address, if any.
+pub async fn user_id_by_email(pool: &AnyPool, email: &Email) -> Result<Option<String>, sqlx::Error> {
+    let row = sqlx::query("SELECT id FROM users WHERE email = $1").bind(email.as_str()).fetch_optional(pool).await?;
+    row.map(|r| r.try_get("id")).transpose()
+}
+
+/// Deletes a user and, by cascade, their sessions, tokens (and, as they
+/// come, projects and unpublished results).
+pub async fn delete_user(pool: &AnyPool, user_id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("DELETE FROM users WHERE id = $1").bind(user_id).execute(pool).await?;
+    Ok(())
+}
+
+/// Prefix of personal access tokens, so they are recognisable in logs and
+/// secret scanners.
+pub const ACCESS_TOKEN_PREFIX: &str = "fbksd_";
+
+/// An access token as listed (never the token itself).
+#[derive(Debug, serde::Serialize)]
+pub struct AccessToken {
+    /// Id, for revoking.
+    pub id: String,
+    /// The user's name for it.
+    pub name: String,
+    /// Creation time, Unix ms.
+    pub created_at: i64,
+    /// Last use, Unix ms.
+    pub last_used_at: Option<i64>,
+}
+
+/// Creates a personal access token named `name`; returns its id and the
+/// token, which is shown this once.
+pub async fn create_access_token(pool: &AnyPool, user_id: &str, name: &str) -> Result<(String, String), ApiError> {
+    let name = name.trim();
+    if name.is_empty() || name.chars().count() > 100 {
+        return Err(ApiError::bad_request("invalid_name", "a token needs a name of 1 to 100 characters"));
+    }
+    let (id, token) = (uuid::Uuid::new_v4().to_string(), format!("{ACCESS_TOKEN_PREFIX}{}", random_token()));
+    sqlx::query("INSERT INTO access_tokens (id, user_id, name, token_hash, created_at) VALUES ($1, $2, $3, $4, $5)")
+        .bind(&id)
+        .bind(user_id)
+        .bind(name)
+        .bind(digest(&token))
+        .bind(now_ms())
+        .execute(pool)
+        .await?;
+    Ok((id, token))
+}
+
+/// A user's access tokens, newest first.
+pub async fn access_tokens(pool: &AnyPool, user_id: &str) -> Result<Vec<AccessToken>, sqlx::Error> {
+    let rows = sqlx::query(
+        "SELECT id, name, created_at, last_used_at FROM access_tokens WHERE user_id = $1 ORDER BY created_at DESC",
+    )
+    .bind(user_id)
+    .fetch_all(pool)
+    .await?;
+    rows.iter()
+        .map(|r| {
+            Ok(AccessToken {
+                id: r.try_get("id")?,
+                name: r.try_get("name")?,
+                created_at: r.try_get("created_at")?,
+                last_used_at: r.try_get("last_used_at")?,
+            })
+        })
+        .collect()
+}
+
+/// Revokes one of a user's tokens; false if the user has no such token.
+pub async fn revoke_access_token(pool: &AnyPool, user_id: &str, id: &str) -> Result<bool, sqlx::Error> {
+    let done = sqlx::query("DELETE FROM access_tokens WHERE id = $1 AND user_id = $2")
+        .bind(id)
+        .bind(user_id)
+        .execute(pool)
+        .await?;
+    Ok(done.rows_affected() > 0)
+}
+
+/// The user a personal access token belongs to (recording its use).
+pub async fn token_user(pool: &AnyPool, token: &str) -> Result<Option<User>, sqlx::Error> {
+    if !token.starts_with(ACCESS_TOKEN_PREFIX) {
+        return Ok(None);
+    }
+    let row = sqlx::query(
+        "SELECT u.id, u.email, u.verified, u.is_admin FROM access_tokens t JOIN users u ON u.id = t.user_id \
+         WHERE t.token_hash = $1",
+    )
+    .bind(digest(token))
+    .fetch_optional(pool)
+    .await?;
+    let Some(row) = row else { return Ok(None) };
+    sqlx::query("UPDATE access_tokens SET last_used_at = $1 WHERE token_hash = $2")
+        .bind(now_ms())
+        .bind(digest(token))
+        .execute(pool)
+        .await?;
+    Ok(Some(user_of(&row)?))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -112,3 +112,169 @@ on_both_databases!(the_first_start_creates_an_administrator_once, |db: Db| async
     let body: Value = log_in(&client, &server.url, &email, &password).await.json().await.unwrap();
     assert_eq!(body["user"]["is_admin"], true);
 });
+
+/// Registers, verifies and logs in `email`; the browser and its CSRF token.
+async fn signed_in(server: &common::TestServer, email: &str, password: &str) -> (reqwest::Client, String) {
+    let browser = server.browser();
+    assert_eq!(register(&browser, &server.url, email, password).await.status(), 201);
+    let link = server.link_in_mail(email, "/accounts/verify?token=");
+    assert_eq!(browser.get(&link).send().await.unwrap().status(), 200);
+    let body: Value = log_in(&browser, &server.url, email, password).await.json().await.unwrap();
+    (browser, body["csrf_token"].as_str().unwrap().to_string())
+}
+
+on_both_databases!(a_forgotten_password_is_reset_by_mail_and_ends_every_session, |db: Db| async move {
+    let server = spawn(db).await;
+    let (browser, _) = signed_in(&server, "eve@example.org", "first password").await;
+    let anonymous = server.browser();
+    let ask = |email: &'static str| {
+        let (c, url) = (anonymous.clone(), server.url.clone());
+        async move { c.post(format!("{url}/api/v1/password-resets")).json(&json!({ "email": email })).send().await.unwrap() }
+    };
+    // The same answer for an unknown address, and no mail.
+    let (known, unknown) = (ask("eve@example.org").await, ask("nobody@example.org").await);
+    assert_eq!((known.status(), unknown.status()), (reqwest::StatusCode::ACCEPTED, reqwest::StatusCode::ACCEPTED));
+    assert_eq!(known.text().await.unwrap(), unknown.text().await.unwrap());
+    assert!(server.mails_to("nobody@example.org").is_empty());
+
+    let mail = server.mails_to("eve@example.org").pop().unwrap();
+    let token = mail
+        .split_whitespace()
+        .find(|w| w.len() == 64 && w.chars().all(|c| c.is_ascii_hexdigit()))
+        .unwrap()
+        .to_string();
+    let confirm = |password: &'static str| {
+        let (c, url, token) = (anonymous.clone(), server.url.clone(), token.clone());
+        async move {
+            c.post(format!("{url}/api/v1/password-resets/confirm"))
+                .json(&json!({ "token": token, "password": password }))
+                .send()
+                .await
+                .unwrap()
+        }
+    };
+    assert_eq!(
+        error_code(confirm("short").await).await,
+        (400, "weak_password".into()),
+        "checked before the token is used"
+    );
+    assert_eq!(confirm("second password").await.status(), 200);
+    assert_eq!(error_code(confirm("third password").await).await, (400, "invalid_token".into()), "once only");
+
+    assert_eq!(
+        browser.get(format!("{}/api/v1/me", server.url)).send().await.unwrap().status(),
+        401,
+        "old sessions end"
+    );
+    assert_eq!(log_in(&anonymous, &server.url, "eve@example.org", "first password").await.status(), 401);
+    assert_eq!(log_in(&anonymous, &server.url, "eve@example.org", "second password").await.status(), 200);
+});
+
+on_both_databases!(access_tokens_authenticate_scripts_until_revoked, |db: Db| async move {
+    let server = spawn(db).await;
+    let (browser, csrf) = signed_in(&server, "tim@example.org", "tims password").await;
+    signed_in(&server, "ann@example.org", "anns password").await;
+    let created: Value = browser
+        .post(format!("{}/api/v1/tokens", server.url))
+        .header("X-CSRF-Token", &csrf)
+        .json(&json!({ "name": "laptop git" }))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let token = created["token"].as_str().unwrap().to_string();
+    assert!(token.starts_with("fbksd_"));
+
+    let script = reqwest::Client::new();
+    let me = script.get(format!("{}/api/v1/me", server.url)).bearer_auth(&token).send().await.unwrap();
+    assert_eq!(me.json::<Value>().await.unwrap()["email"], "tim@example.org");
+    let listed: Value = script
+        .get(format!("{}/api/v1/tokens", server.url))
+        .bearer_auth(&token)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(listed[0]["name"], "laptop git");
+    assert!(listed[0]["last_used_at"].is_i64(), "use is recorded");
+    assert!(!listed.to_string().contains(&token[6..]), "the secret is never listed");
+
+    // Another user cannot revoke it; its owner can.
+    let ann = signed_in_token(&server, "ann@example.org", "anns password").await;
+    let id = created["id"].as_str().unwrap();
+    let theirs = script.delete(format!("{}/api/v1/tokens/{id}", server.url)).bearer_auth(&ann).send().await.unwrap();
+    assert_eq!(theirs.status(), 404);
+    assert_eq!(
+        script.delete(format!("{}/api/v1/tokens/{id}", server.url)).bearer_auth(&token).send().await.unwrap().status(),
+        204
+    );
+    let revoked = script.get(format!("{}/api/v1/me", server.url)).bearer_auth(&token).send().await.unwrap();
+    assert_eq!(error_code(revoked).await, (401, "unauthorized".into()));
+    let bogus = script.get(format!("{}/api/v1/me", server.url)).bearer_auth("fbksd_nope").send().await.unwrap();
+    assert_eq!(bogus.status(), 401);
+});
+
+/// A fresh access token of an already registered, verified user.
+async fn signed_in_token(server: &common::TestServer, email: &str, password: &str) -> String {
+    let browser = server.browser();
+    let body: Value = log_in(&browser, &server.url, email, password).await.json().await.unwrap();
+    let csrf = body["csrf_token"].as_str().unwrap();
+    let created: Value = browser
+        .post(format!("{}/api/v1/tokens", server.url))
+        .header("X-CSRF-Token", csrf)
+        .json(&json!({ "name": "test" }))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    created["token"].as_str().unwrap().to_string()
+}
+
+on_both_databases!(changing_the_password_or_deleting_the_account_needs_the_password, |db: Db| async move {
+    let server = spawn(db).await;
+    let (browser, csrf) = signed_in(&server, "kim@example.org", "kims password").await;
+    let token = signed_in_token(&server, "kim@example.org", "kims password").await;
+    let patch = |current: &'static str| {
+        let (b, url, csrf) = (browser.clone(), server.url.clone(), csrf.clone());
+        async move {
+            b.patch(format!("{url}/api/v1/me"))
+                .header("X-CSRF-Token", csrf)
+                .json(&json!({ "current_password": current, "new_password": "kims new password" }))
+                .send()
+                .await
+                .unwrap()
+        }
+    };
+    assert_eq!(error_code(patch("guess").await).await, (403, "wrong_password".into()));
+    assert_eq!(patch("kims password").await.status(), 200);
+    assert_eq!(browser.get(format!("{}/api/v1/me", server.url)).send().await.unwrap().status(), 401, "sessions end");
+
+    let script = reqwest::Client::new();
+    let delete = |password: &'static str| {
+        let (c, url, token) = (script.clone(), server.url.clone(), token.clone());
+        async move {
+            c.delete(format!("{url}/api/v1/me"))
+                .bearer_auth(token)
+                .json(&json!({ "password": password }))
+                .send()
+                .await
+                .unwrap()
+        }
+    };
+    assert_eq!(
+        error_code(delete("kims password").await).await,
+        (403, "wrong_password".into()),
+        "the old one no longer works"
+    );
+    assert_eq!(delete("kims new password").await.status(), 204);
+    assert_eq!(script.get(format!("{}/api/v1/me", server.url)).bearer_auth(&token).send().await.unwrap().status(), 401);
+    assert_eq!(log_in(&script, &server.url, "kim@example.org", "kims new password").await.status(), 401);
+    // The address is free again.
+    assert_eq!(register(&script, &server.url, "kim@example.org", "a fresh start").await.status(), 201);
+});

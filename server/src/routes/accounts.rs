@@ -1,6 +1,6 @@
 //! Registration, e-mail verification, logging in and out.
 
-use super::{SessionUser, SESSION_COOKIE};
+use super::{Caller, SessionUser, SESSION_COOKIE};
 use crate::accounts::{self, Email, Password};
 use crate::error::ApiError;
 use crate::AppState;
@@ -85,7 +85,133 @@ pub async fn log_out(State(state): State<AppState>, session: SessionUser) -> Res
     Ok(([(header::SET_COOKIE, cookie)], StatusCode::NO_CONTENT).into_response())
 }
 
-/// `GET /api/v1/me`: who is logged in.
-pub async fn me(session: SessionUser) -> Json<accounts::User> {
-    Json(session.user)
+/// `GET /api/v1/me`: who is calling.
+pub async fn me(caller: Caller) -> Json<accounts::User> {
+    Json(caller.user)
+}
+
+/// A password change.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PasswordChange {
+    current_password: String,
+    new_password: String,
+}
+
+/// `PATCH /api/v1/me`: changes the password (the current one is required);
+/// every session ends, this one too.
+pub async fn change_password(
+    State(state): State<AppState>,
+    caller: Caller,
+    Json(body): Json<PasswordChange>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    accounts::check_password(&state.pool, &caller.user.id, &body.current_password).await?;
+    let password = Password::parse(&body.new_password)?;
+    accounts::set_password(&state.pool, &caller.user.id, &password).await?;
+    Ok(Json(json!({ "changed": true, "message": "password changed: log in again" })))
+}
+
+/// The password, confirming a deletion.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PasswordConfirmation {
+    password: String,
+}
+
+/// `DELETE /api/v1/me`: deletes the account (password required).
+pub async fn delete_account(
+    State(state): State<AppState>,
+    caller: Caller,
+    Json(body): Json<PasswordConfirmation>,
+) -> Result<StatusCode, ApiError> {
+    accounts::check_password(&state.pool, &caller.user.id, &body.password).await?;
+    accounts::delete_user(&state.pool, &caller.user.id).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// An address asking for a password reset.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResetRequest {
+    email: String,
+}
+
+/// `POST /api/v1/password-resets`: mails a reset link if the address has an
+/// account. The answer is the same either way, so it reveals no accounts.
+pub async fn request_password_reset(
+    State(state): State<AppState>,
+    Json(body): Json<ResetRequest>,
+) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
+    let email = Email::parse(&body.email)?;
+    if let Some(user_id) = accounts::user_id_by_email(&state.pool, &email).await? {
+        let token = accounts::issue_email_token(&state.pool, &user_id, "reset").await?;
+        let body = format!(
+            "Someone asked to reset the password of your FBKSD account.\n\n\
+             Your reset token (valid once, for 48 hours):\n\n{token}\n\n\
+             Send it with your new password to {}/api/v1/password-resets/confirm.\n\
+             If it was not you, ignore this message: your password is unchanged.\n",
+            state.public_url
+        );
+        state.mailer.send(&state.config.mail_from, email.as_str(), "Reset your FBKSD password", body).await?;
+    }
+    let message = "if this address has an account, a reset token is on its way";
+    Ok((StatusCode::ACCEPTED, Json(json!({ "message": message }))))
+}
+
+/// A reset token and the new password.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PasswordReset {
+    token: String,
+    password: String,
+}
+
+/// `POST /api/v1/password-resets/confirm`: sets the new password; every
+/// session ends.
+pub async fn reset_password(
+    State(state): State<AppState>,
+    Json(body): Json<PasswordReset>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let password = Password::parse(&body.password)?;
+    let user_id = accounts::redeem_email_token(&state.pool, &body.token, "reset").await?;
+    accounts::set_password(&state.pool, &user_id, &password).await?;
+    Ok(Json(json!({ "changed": true })))
+}
+
+/// A new token's name.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TokenName {
+    name: String,
+}
+
+/// `POST /api/v1/tokens`: creates a personal access token, shown once.
+pub async fn create_token(
+    State(state): State<AppState>,
+    caller: Caller,
+    Json(body): Json<TokenName>,
+) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
+    let (id, token) = accounts::create_access_token(&state.pool, &caller.user.id, &body.name).await?;
+    Ok((StatusCode::CREATED, Json(json!({ "id": id, "token": token, "message": "copy it now: it is shown once" }))))
+}
+
+/// `GET /api/v1/tokens`: the caller's tokens (never the secrets).
+pub async fn list_tokens(
+    State(state): State<AppState>,
+    caller: Caller,
+) -> Result<Json<Vec<accounts::AccessToken>>, ApiError> {
+    Ok(Json(accounts::access_tokens(&state.pool, &caller.user.id).await?))
+}
+
+/// `DELETE /api/v1/tokens/{id}`: revokes one of the caller's tokens.
+pub async fn revoke_token(
+    State(state): State<AppState>,
+    caller: Caller,
+    axum::extract::Path(id): axum::extract::Path<String>,
+) -> Result<StatusCode, ApiError> {
+    if accounts::revoke_access_token(&state.pool, &caller.user.id, &id).await? {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("you have no token {id}")))
+    }
 }

@@ -1,10 +1,13 @@
 //! Every route, grouped by who calls it, and the extractors that
 //! authenticate callers.
 //!
-//! Browser sessions carry a cookie (`fbksd_session`, HttpOnly,
-//! SameSite=Lax); every state-changing request of a session must also send
-//! the session's CSRF token in the `X-CSRF-Token` header (forms: the
-//! `csrf_token` field), or it is refused with 403.
+//! Callers authenticate in one of two ways ([`Caller`]):
+//! - browser sessions carry a cookie (`fbksd_session`, HttpOnly,
+//!   SameSite=Lax); every state-changing request of a session must also
+//!   send the session's CSRF token in the `X-CSRF-Token` header (forms: the
+//!   `csrf_token` field), or it is refused with 403;
+//! - scripts and git send a personal access token as
+//!   `Authorization: Bearer fbksd_…`; no cookie, so no CSRF check.
 
 mod accounts;
 
@@ -14,7 +17,7 @@ use crate::AppState;
 use axum::extract::FromRequestParts;
 use axum::http::request::Parts;
 use axum::http::Method;
-use axum::routing::{get, post};
+use axum::routing::{delete, get, post};
 use axum::Router;
 
 /// Name of the session cookie.
@@ -28,8 +31,14 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/accounts/verify", post(accounts::verify))
         .route("/accounts/verify", get(accounts::verify_link))
         .route("/api/v1/sessions", post(accounts::log_in).delete(accounts::log_out))
-        .route("/api/v1/me", get(accounts::me))
+        .route("/api/v1/me", get(accounts::me).patch(accounts::change_password).delete(accounts::delete_account))
+        .route("/api/v1/password-resets", post(accounts::request_password_reset))
+        .route("/api/v1/password-resets/confirm", post(accounts::reset_password))
+        .route("/api/v1/tokens", post(accounts::create_token).get(accounts::list_tokens))
+        .route("/api/v1/tokens/{id}", delete(accounts::revoke_token))
         .with_state(state)
+        // A bug in one handler answers 500 instead of dropping the connection.
+        .layer(tower_http::catch_panic::CatchPanicLayer::new())
 }
 
 /// The value of cookie `name` in the request.
@@ -72,5 +81,31 @@ impl FromRequestParts<AppState> for SessionUser {
             }
         }
         Ok(SessionUser { user, token })
+    }
+}
+
+/// An authenticated caller: a browser session (CSRF-checked for state
+/// changes) or a personal access token.
+pub struct Caller {
+    /// Who is calling.
+    pub user: User,
+}
+
+impl FromRequestParts<AppState> for Caller {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
+        let bearer = parts
+            .headers
+            .get(axum::http::header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.strip_prefix("Bearer "));
+        if let Some(token) = bearer {
+            let user = crate::accounts::token_user(&state.pool, token.trim())
+                .await?
+                .ok_or_else(|| ApiError::unauthorized("unknown or revoked access token"))?;
+            return Ok(Caller { user });
+        }
+        SessionUser::from_request_parts(parts, state).await.map(|s| Caller { user: s.user })
     }
 }
