@@ -174,16 +174,7 @@ on_both_databases!(access_tokens_authenticate_scripts_until_revoked, |db: Db| as
     let server = spawn(db).await;
     let (browser, csrf) = signed_in(&server, "tim@example.org", "tims password").await;
     signed_in(&server, "ann@example.org", "anns password").await;
-    let created: Value = browser
-        .post(format!("{}/api/v1/tokens", server.url))
-        .header("X-CSRF-Token", &csrf)
-        .json(&json!({ "name": "laptop git" }))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let created = create_token(&browser, &server.url, &csrf, "laptop git").await;
     let token = created["token"].as_str().unwrap().to_string();
     assert!(token.starts_with("fbksd_"));
 
@@ -223,17 +214,20 @@ async fn signed_in_token(server: &common::TestServer, email: &str, password: &st
     let browser = server.browser();
     let body: Value = log_in(&browser, &server.url, email, password).await.json().await.unwrap();
     let csrf = body["csrf_token"].as_str().unwrap();
-    let created: Value = browser
-        .post(format!("{}/api/v1/tokens", server.url))
+    create_token(&browser, &server.url, csrf, "test").await["token"].as_str().unwrap().to_string()
+}
+
+/// Creates an access token from a logged-in browser; the answer (`id`, `token`).
+async fn create_token(browser: &reqwest::Client, url: &str, csrf: &str, name: &str) -> Value {
+    let response = browser
+        .post(format!("{url}/api/v1/tokens"))
         .header("X-CSRF-Token", csrf)
-        .json(&json!({ "name": "test" }))
+        .json(&json!({ "name": name }))
         .send()
         .await
-        .unwrap()
-        .json()
-        .await
         .unwrap();
-    created["token"].as_str().unwrap().to_string()
+    assert_eq!(response.status(), 201);
+    response.json().await.unwrap()
 }
 
 on_both_databases!(changing_the_password_or_deleting_the_account_needs_the_password, |db: Db| async move {

@@ -186,9 +186,15 @@ impl BenchmarkClient {
     }
 }
 
-/// Shape of a pixel tile as numpy sees it.
-fn shape_of(tile_w: u32, tile_h: u32, spp: u32, size: usize) -> (usize, usize, usize, usize) {
-    (tile_h as usize, tile_w as usize, spp as usize, size)
+/// A pixel tile (read-only or writable: both have the same accessors) as
+/// the callback arguments `(array, (x, y))`, the array viewing `$data`.
+macro_rules! pixel_tile {
+    ($keep:expr, $tile:expr, $data:expr) => {{
+        let (w, h) = ($tile.end_x() - $tile.begin_x(), $tile.end_y() - $tile.begin_y());
+        let shape = (h as usize, w as usize, $tile.spp() as usize, $tile.sample_size());
+        let offset = ($tile.begin_x(), $tile.begin_y());
+        (tile_array($keep, shape, $data), offset)
+    }};
 }
 
 #[pymethods]
@@ -268,17 +274,7 @@ impl BenchmarkClient {
         let keep = slf.get().keep(slf.py());
         request(slf.get(), |client, failure| {
             client.evaluate_samples(Spp(spp), |tile| {
-                call(failure, || {
-                    let shape = shape_of(
-                        tile.end_x() - tile.begin_x(),
-                        tile.end_y() - tile.begin_y(),
-                        tile.spp(),
-                        tile.sample_size(),
-                    );
-                    let array = tile_array(&keep, shape, tile.data().as_ptr());
-                    consumer.call1((array, (tile.begin_x(), tile.begin_y())))?;
-                    Ok(())
-                })
+                call(failure, || consumer.call1(pixel_tile!(&keep, tile, tile.data().as_ptr())).map(drop))
             })
         })
     }
@@ -312,19 +308,13 @@ impl BenchmarkClient {
                 Spp(spp),
                 |tile| {
                     call(&mut failure.borrow_mut(), || {
-                        let (w, h) = (tile.end_x() - tile.begin_x(), tile.end_y() - tile.begin_y());
-                        let shape = shape_of(w, h, tile.spp(), tile.sample_size());
-                        let offset = (tile.begin_x(), tile.begin_y());
-                        let array = tile_array(&keep, shape, tile.data_mut().as_mut_ptr());
-                        producer.call1((array, offset)).map(drop)
+                        let data = tile.data_mut().as_mut_ptr();
+                        producer.call1(pixel_tile!(&keep, tile, data)).map(drop)
                     })
                 },
                 |tile| {
                     call(&mut failure.borrow_mut(), || {
-                        let (w, h) = (tile.end_x() - tile.begin_x(), tile.end_y() - tile.begin_y());
-                        let shape = shape_of(w, h, tile.spp(), tile.sample_size());
-                        let array = tile_array(&keep, shape, tile.data().as_ptr());
-                        consumer.call1((array, (tile.begin_x(), tile.begin_y()))).map(drop)
+                        consumer.call1(pixel_tile!(&keep, tile, tile.data().as_ptr())).map(drop)
                     })
                 },
             )
