@@ -141,6 +141,7 @@ def produce(tile, offset):
 def consume(tile, offset):
     (ny, nx, _, _) = tile.shape
     (bx, by) = offset
+    assert client.sample_size() == 6, "callbacks can ask the sample size"
     assert np.array_equal(tile[..., 0, 0], np.broadcast_to(bx + np.arange(nx) + 0.25, (ny, nx)))
     seen.append(ny * nx)
     result[by:by + ny, bx:bx + nx] = tile[:, :, 0, 2:5]

@@ -91,6 +91,8 @@ struct BenchmarkClient {
     result: usize,
     /// Replaced once the layout is set, to cover the tile ring too.
     mapping: Mutex<Py<Mapping>>,
+    /// Floats per sample, known without the client's lock (callbacks ask).
+    sample_size: std::sync::atomic::AtomicUsize,
 }
 
 /// Runs one request: `run` gets the client and a slot for the first error a
@@ -221,6 +223,7 @@ impl BenchmarkClient {
             height,
             result,
             mapping: Mutex::new(mapping),
+            sample_size: Default::default(),
         })
     }
 
@@ -239,7 +242,11 @@ impl BenchmarkClient {
         let this = slf.get();
         request(this, |client, _| client.set_sample_layout(&layout))?;
         // The ring now exists: arrays made from here on keep it mapped too.
-        let mappings = this.client.lock().unwrap().as_ref().map(Client::mappings);
+        let (mappings, size) = {
+            let client = this.client.lock().unwrap();
+            (client.as_ref().map(Client::mappings), client.as_ref().map_or(0, Client::sample_size))
+        };
+        this.sample_size.store(size, std::sync::atomic::Ordering::Relaxed);
         if let Some(m) = mappings {
             *this.mapping.lock().unwrap() = Py::new(slf.py(), Mapping(m))?;
         }
@@ -248,7 +255,7 @@ impl BenchmarkClient {
 
     /// Floats per sample of the layout (0 before one is set).
     fn sample_size(&self) -> usize {
-        self.client.try_lock().ok().and_then(|c| c.as_ref().map(Client::sample_size)).unwrap_or(0)
+        self.sample_size.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Samples left in the budget.
