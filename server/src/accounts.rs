@@ -284,6 +284,15 @@ pub async fn check_password(pool: &AnyPool, user_id: &str, password: &str) -> Re
     }
 }
 
+/// The user with id `id`, if any.
+pub async fn user_by_id(pool: &AnyPool, id: &str) -> Result<Option<User>, sqlx::Error> {
+    let row = sqlx::query("SELECT id, email, verified, is_admin FROM users WHERE id = $1")
+        .bind(id)
+        .fetch_optional(pool)
+        .await?;
+    row.as_ref().map(user_of).transpose()
+}
+
 /// The id of the user with this address, if any.
 pub async fn user_id_by_email(pool: &AnyPool, email: &Email) -> Result<Option<String>, sqlx::Error> {
     let row = sqlx::query("SELECT id FROM users WHERE email = $1").bind(email.as_str()).fetch_optional(pool).await?;

@@ -42,6 +42,28 @@ pub struct Config {
     pub mail_from: String,
     /// How long a browser session lasts, in hours.
     pub session_hours: u64,
+    /// The token runners register with; empty means one is generated at
+    /// the first start and printed once.
+    pub runner_registration_token: Secret,
+    /// Largest push, in bytes.
+    pub max_push_bytes: u64,
+    /// A job's lease: a runner that does not heartbeat for this long loses
+    /// the job, which is queued again.
+    pub lease_seconds: u64,
+    /// How many times a job is handed to a runner before it fails as an
+    /// infrastructure error.
+    pub max_attempts: u64,
+    /// Longest a runner's claim waits for a job, in seconds.
+    pub long_poll_seconds: u64,
+    /// Largest log a job may write, in bytes.
+    pub max_log_bytes: u64,
+    /// Largest upload of one job (results and files together), in bytes.
+    pub max_upload_bytes: u64,
+    /// Queued jobs (builds and runs) a user may have before new runs are refused.
+    pub max_queued_jobs_per_user: u64,
+    /// Benchmark runs a user may request per 24 hours; infrastructure
+    /// failures and runs cancelled before they started do not count.
+    pub max_runs_per_day: u64,
 }
 
 impl Default for Config {
@@ -54,6 +76,15 @@ impl Default for Config {
             smtp_url: Secret::default(),
             mail_from: "FBKSD <fbksd@localhost>".into(),
             session_hours: 24 * 14,
+            runner_registration_token: Secret::default(),
+            max_push_bytes: 64 << 20,
+            lease_seconds: 60,
+            max_attempts: 3,
+            long_poll_seconds: 25,
+            max_log_bytes: 4 << 20,
+            max_upload_bytes: 256 << 20,
+            max_queued_jobs_per_user: 3,
+            max_runs_per_day: 10,
         }
     }
 }

@@ -24,8 +24,15 @@ mod app;
 pub mod config;
 pub mod db;
 pub mod error;
+pub mod git;
+pub mod jobs;
+pub mod leaderboard;
 pub mod mail;
+pub mod pipelines;
+pub mod projects;
+pub mod results;
 pub mod routes;
+pub mod runners;
 
 pub use app::{AppState, Application};
 

@@ -27,6 +27,9 @@ async fn main() -> anyhow::Result<()> {
     if let Some((email, password)) = app.admin_credentials() {
         println!("administrator created: {email} / {password} (shown once: change it after logging in)");
     }
+    if let Some(token) = app.runner_registration_token() {
+        println!("runner registration token: {token} (shown once; an administrator can rotate it)");
+    }
     app.run().await?;
     Ok(())
 }

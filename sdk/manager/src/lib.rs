@@ -12,6 +12,7 @@
 //!   directory ([`results`]).
 //! - [`process`]: supervised child processes (CPU time and peak memory by `wait4`).
 //! - [`evaluation`]: metric values and error maps of a results directory, and ranking.
+//! - [`technique`]: a technique repository's `info.json`.
 //!
 //! ```no_run
 //! use fbksd_manager::{Benchmark, TechniqueSpec, SceneSpec, Limits};
@@ -36,6 +37,7 @@ pub mod record;
 pub mod results;
 pub mod scene;
 pub mod scenes;
+pub mod technique;
 
 pub use benchmark::{Benchmark, Progress, SceneSpec, TechniqueSpec};
 pub use record::{RunRecord, RunStatus, Times};

@@ -125,7 +125,13 @@ pub async fn delete_account(
     Json(body): Json<PasswordConfirmation>,
 ) -> Result<StatusCode, ApiError> {
     accounts::check_password(&state.pool, &caller.user.id, &body.password).await?;
+    // Projects and unpublished results go with the account; published results stay on the leaderboard.
+    let projects = crate::projects::ids_of_owner(&state.pool, &caller.user.id).await?;
+    crate::results::discard_unpublished_of(&state.pool, &state.config.data_dir, &caller.user.id).await?;
     accounts::delete_user(&state.pool, &caller.user.id).await?;
+    for project in projects {
+        state.git.delete(&project).await;
+    }
     Ok(StatusCode::NO_CONTENT)
 }
 

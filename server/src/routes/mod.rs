@@ -10,6 +10,10 @@
 //!   `Authorization: Bearer fbksd_…`; no cookie, so no CSRF check.
 
 mod accounts;
+mod admin;
+mod projects;
+mod results;
+mod runner;
 
 use crate::accounts::User;
 use crate::error::ApiError;
@@ -17,7 +21,7 @@ use crate::AppState;
 use axum::extract::FromRequestParts;
 use axum::http::request::Parts;
 use axum::http::Method;
-use axum::routing::{delete, get, post};
+use axum::routing::{any, delete, get, post, put};
 use axum::Router;
 
 /// Name of the session cookie.
@@ -36,6 +40,35 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/password-resets/confirm", post(accounts::reset_password))
         .route("/api/v1/tokens", post(accounts::create_token).get(accounts::list_tokens))
         .route("/api/v1/tokens/{id}", delete(accounts::revoke_token))
+        .route("/api/v1/projects", post(projects::create).get(projects::list))
+        .route("/api/v1/projects/{name}", get(projects::show).delete(projects::delete))
+        .route("/api/v1/projects/{name}/pipelines", post(projects::run_pipeline))
+        .route("/api/v1/jobs/{id}", get(projects::job))
+        .route("/api/v1/jobs/{id}/log", get(projects::log).post(runner::append_log))
+        .route("/api/v1/jobs/{id}/log/stream", get(projects::log_stream))
+        .route("/api/v1/jobs/{id}/cancel", post(projects::cancel))
+        .route("/api/v1/results/{id}", get(results::show).delete(results::discard))
+        .route("/api/v1/results/{id}/publish", post(results::publish))
+        .route("/api/v1/results/{id}/unpublish", post(results::unpublish))
+        .route("/api/v1/leaderboard", get(results::board))
+        .route("/results/{id}/files/{*name}", get(results::file))
+        // Git, with personal access tokens (HTTP Basic password) or a job token.
+        .route("/git/{repo}/{*rest}", any(projects::git))
+        // Runners, with their runner token or a job token.
+        .route("/api/v1/runners", post(runner::register))
+        .route("/api/v1/runners/jobs", post(runner::claim))
+        .route("/api/v1/jobs/{id}/heartbeat", post(runner::heartbeat))
+        .route("/api/v1/jobs/{id}/results", put(runner::put_results))
+        .route("/api/v1/jobs/{id}/files/{*name}", put(runner::put_file))
+        .route("/api/v1/jobs/{id}/finish", post(runner::finish))
+        // Administrators.
+        .route("/api/v1/admin/jobs", get(admin::jobs))
+        .route("/api/v1/admin/jobs/{id}/requeue", post(admin::requeue))
+        .route("/api/v1/admin/runners", get(admin::runners))
+        .route("/api/v1/admin/runners/{id}", delete(admin::remove_runner))
+        .route("/api/v1/admin/runner-registration-token", post(admin::rotate_registration_token))
+        .route("/api/v1/admin/results/{id}/hide", post(results::hide).delete(results::unhide))
+        .route("/api/v1/admin/seasons", post(admin::new_season))
         .with_state(state)
         // A bug in one handler answers 500 instead of dropping the connection.
         .layer(tower_http::catch_panic::CatchPanicLayer::new())
@@ -101,11 +134,123 @@ impl FromRequestParts<AppState> for Caller {
             .and_then(|v| v.to_str().ok())
             .and_then(|v| v.strip_prefix("Bearer "));
         if let Some(token) = bearer {
-            let user = crate::accounts::token_user(&state.pool, token.trim())
+            let token = token.trim();
+            if token.starts_with(crate::runners::RUNNER_TOKEN_PREFIX)
+                || token.starts_with(crate::jobs::JOB_TOKEN_PREFIX)
+            {
+                return Err(ApiError::forbidden(
+                    "not_a_user_token",
+                    "runner and job tokens cannot act as a user: use a personal access token",
+                ));
+            }
+            let user = crate::accounts::token_user(&state.pool, token)
                 .await?
                 .ok_or_else(|| ApiError::unauthorized("unknown or revoked access token"))?;
             return Ok(Caller { user });
         }
         SessionUser::from_request_parts(parts, state).await.map(|s| Caller { user: s.user })
+    }
+}
+
+/// The caller if authenticated, or anonymous (for pages and reads that
+/// depend on visibility). A token that is sent but invalid is refused.
+pub struct MaybeUser(pub Option<User>);
+
+impl FromRequestParts<AppState> for MaybeUser {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
+        if parts.headers.contains_key(axum::http::header::AUTHORIZATION) || cookie(parts, SESSION_COOKIE).is_some() {
+            match Caller::from_request_parts(parts, state).await {
+                Ok(c) => return Ok(MaybeUser(Some(c.user))),
+                // An expired session reads as anonymous; a bad token is an error.
+                Err(e) if parts.headers.contains_key(axum::http::header::AUTHORIZATION) => return Err(e),
+                Err(_) => {}
+            }
+        }
+        Ok(MaybeUser(None))
+    }
+}
+
+/// An administrator (session or token).
+pub struct Admin(pub User);
+
+impl FromRequestParts<AppState> for Admin {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
+        let caller = Caller::from_request_parts(parts, state).await?;
+        if caller.user.is_admin {
+            Ok(Admin(caller.user))
+        } else {
+            Err(ApiError::forbidden("not_admin", "only administrators can do this"))
+        }
+    }
+}
+
+fn bearer(parts: &Parts) -> Option<&str> {
+    parts
+        .headers
+        .get(axum::http::header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .map(str::trim)
+}
+
+/// A registered runner, by its runner token.
+pub struct RunnerCaller(pub String);
+
+impl FromRequestParts<AppState> for RunnerCaller {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
+        let token =
+            bearer(parts).ok_or_else(|| ApiError::unauthorized("send the runner token as Authorization: Bearer"))?;
+        crate::runners::token_runner(&state.pool, token)
+            .await?
+            .map(RunnerCaller)
+            .ok_or_else(|| ApiError::unauthorized("unknown runner token: register the runner again"))
+    }
+}
+
+/// The job a job token was issued for, while that attempt runs; the
+/// token must belong to the job in the path.
+pub struct JobCaller {
+    /// The job.
+    pub job_id: String,
+    /// The attempt the token belongs to.
+    pub attempt: i64,
+}
+
+impl FromRequestParts<AppState> for JobCaller {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
+        let axum::extract::Path(params): axum::extract::Path<std::collections::HashMap<String, String>> =
+            axum::extract::Path::from_request_parts(parts, state)
+                .await
+                .map_err(|e| ApiError::bad_request("invalid_path", e.to_string()))?;
+        let path_job = params.get("id").cloned().unwrap_or_default();
+        let token = bearer(parts)
+            .filter(|t| t.starts_with(crate::jobs::JOB_TOKEN_PREFIX))
+            .ok_or_else(|| ApiError::unauthorized("send the job's token (fbksdj_…) as Authorization: Bearer"))?;
+        let (job_id, job_state, attempt) = crate::jobs::token_job(&state.pool, token).await?.ok_or_else(|| {
+            ApiError::new(
+                axum::http::StatusCode::GONE,
+                "lease_lost",
+                "this job token is no longer valid: the job was cancelled, finished or given to another runner",
+            )
+        })?;
+        if job_id != path_job {
+            return Err(ApiError::forbidden("wrong_job", "this job token belongs to another job"));
+        }
+        if job_state != "running" {
+            return Err(ApiError::new(
+                axum::http::StatusCode::GONE,
+                "lease_lost",
+                format!("the job is {job_state}: stop working on it"),
+            ));
+        }
+        Ok(JobCaller { job_id, attempt })
     }
 }

@@ -41,6 +41,15 @@ async fn fresh_postgres() -> String {
 
 /// Starts a server over a fresh database of kind `db`.
 pub async fn spawn(db: Db) -> TestServer {
+    spawn_with(db, |_| {}).await
+}
+
+/// The runner registration token test servers are configured with.
+pub const REGISTRATION_TOKEN: &str = "test-registration-token";
+
+/// Starts a server over a fresh database of kind `db`, with `adjust`
+/// applied to its configuration.
+pub async fn spawn_with(db: Db, adjust: impl FnOnce(&mut Config)) -> TestServer {
     let data = tempfile::tempdir().unwrap();
     let database_url = match db {
         Db::Sqlite => String::new(),
@@ -50,8 +59,11 @@ pub async fn spawn(db: Db) -> TestServer {
         bind: "127.0.0.1:0".into(),
         data_dir: data.path().to_path_buf(),
         database_url: Secret(database_url),
+        runner_registration_token: Secret(REGISTRATION_TOKEN.into()),
         ..Config::default()
     };
+    let mut config = config;
+    adjust(&mut config);
     let outbox = config.outbox_dir();
     let app = fbksd_server::Application::build(config).await.expect("server starts");
     let url = format!("http://127.0.0.1:{}", app.port());
@@ -92,17 +104,257 @@ impl TestServer {
     }
 }
 
+/// A verified, logged-in user: a browser with its session, the session's
+/// CSRF token, and a personal access token for scripts and git.
+pub struct TestUser {
+    pub email: String,
+    pub browser: reqwest::Client,
+    pub csrf: String,
+    pub token: String,
+}
+
+impl TestServer {
+    /// Registers `email`, verifies it through the outbox, logs in and
+    /// creates an access token.
+    pub async fn user(&self, email: &str) -> TestUser {
+        let browser = self.browser();
+        let password = "a long enough password";
+        let created = browser
+            .post(format!("{}/api/v1/accounts", self.url))
+            .json(&serde_json::json!({ "email": email, "password": password }))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(created.status(), 201);
+        let link = self.link_in_mail(email, "/accounts/verify?token=");
+        assert_eq!(browser.get(&link).send().await.unwrap().status(), 200);
+        self.log_in(email, password, browser).await
+    }
+
+    /// Logs `email` in with `browser` and creates an access token.
+    pub async fn log_in(&self, email: &str, password: &str, browser: reqwest::Client) -> TestUser {
+        let session: serde_json::Value = browser
+            .post(format!("{}/api/v1/sessions", self.url))
+            .json(&serde_json::json!({ "email": email, "password": password }))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        let csrf = session["csrf_token"].as_str().expect("logged in").to_string();
+        let token: serde_json::Value = browser
+            .post(format!("{}/api/v1/tokens", self.url))
+            .header("X-CSRF-Token", &csrf)
+            .json(&serde_json::json!({ "name": "tests" }))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        TestUser { email: email.into(), browser, csrf, token: token["token"].as_str().unwrap().to_string() }
+    }
+
+    /// The administrator created at start, logged in.
+    pub async fn admin(&self) -> TestUser {
+        let (email, password) = self.admin.clone().expect("first start creates an administrator");
+        self.log_in(&email, &password, self.browser()).await
+    }
+
+    /// The URL of a project's repository with `token` as the password.
+    pub fn clone_url(&self, project: &str, token: &str) -> String {
+        let host = self.url.trim_start_matches("http://");
+        format!("http://git:{token}@{host}/git/{project}.git")
+    }
+}
+
+impl TestUser {
+    /// An API request with the user's access token.
+    pub fn api(&self, method: reqwest::Method, url: String) -> reqwest::RequestBuilder {
+        reqwest::Client::new().request(method, url).bearer_auth(&self.token)
+    }
+}
+
+/// Runs git in `dir` without prompts or user configuration; its output.
+pub fn git(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
+    std::process::Command::new("git")
+        .current_dir(dir)
+        .args(["-c", "user.name=Test", "-c", "user.email=test@example.org", "-c", "credential.helper="])
+        .args(args)
+        .env("GIT_TERMINAL_PROMPT", "0")
+        .env("GIT_CONFIG_NOSYSTEM", "1")
+        .env("HOME", dir)
+        .output()
+        .expect("git runs")
+}
+
+/// A local repository holding the SDK's example technique `name`
+/// (`sdk/techniques/<name>`), committed on `main`.
+pub fn technique_repository(name: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let source = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk/techniques").join(name);
+    for entry in std::fs::read_dir(&source).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), dir.path().join(entry.file_name())).unwrap();
+    }
+    assert!(git(dir.path(), &["init", "-q", "-b", "main"]).status.success());
+    commit_all(dir.path(), "first");
+    dir
+}
+
+/// Commits every change in `dir`.
+pub fn commit_all(dir: &std::path::Path, message: &str) {
+    assert!(git(dir, &["add", "-A"]).status.success());
+    let out = git(dir, &["commit", "-q", "--allow-empty", "-m", message]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Pushes `main` of `dir` to `url` with push options; (success, stderr).
+pub fn push(dir: &std::path::Path, url: &str, options: &[&str]) -> (bool, String) {
+    let mut args = vec!["push", "--porcelain"];
+    for option in options {
+        args.extend(["-o", option]);
+    }
+    args.extend([url, "main"]);
+    let out = git(dir, &args);
+    (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout))
+}
+
+/// A runner driven by the test through the real runner API.
+pub struct FakeRunner {
+    pub url: String,
+    pub token: String,
+    client: reqwest::Client,
+}
+
+/// A job a fake runner holds.
+pub struct HeldJob {
+    pub id: String,
+    pub token: String,
+    pub body: serde_json::Value,
+}
+
+impl FakeRunner {
+    /// Registers a runner named `name`.
+    pub async fn register(server: &TestServer, name: &str) -> FakeRunner {
+        let client = reqwest::Client::new();
+        let response = client
+            .post(format!("{}/api/v1/runners", server.url))
+            .json(&serde_json::json!({
+                "registration_token": REGISTRATION_TOKEN,
+                "name": name,
+                "machine": { "cpu_model": "test CPU", "cores": 2 }
+            }))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(response.status(), 201);
+        let body: serde_json::Value = response.json().await.unwrap();
+        FakeRunner { url: server.url.clone(), token: body["token"].as_str().unwrap().into(), client }
+    }
+
+    /// Claims a job, waiting up to `wait_seconds`.
+    pub async fn claim(&self, wait_seconds: u64) -> Option<HeldJob> {
+        let response = self
+            .client
+            .post(format!("{}/api/v1/runners/jobs", self.url))
+            .bearer_auth(&self.token)
+            .json(&serde_json::json!({ "wait_seconds": wait_seconds }))
+            .send()
+            .await
+            .unwrap();
+        match response.status().as_u16() {
+            204 => None,
+            200 => {
+                let body: serde_json::Value = response.json().await.unwrap();
+                Some(HeldJob {
+                    id: body["job"]["id"].as_str().unwrap().into(),
+                    token: body["token"].as_str().unwrap().into(),
+                    body,
+                })
+            }
+            other => panic!("claim answered {other}: {}", response.text().await.unwrap()),
+        }
+    }
+
+    /// A request about `job` with `token` (usually the job's own).
+    pub fn job_request(&self, method: reqwest::Method, job: &str, token: &str, tail: &str) -> reqwest::RequestBuilder {
+        self.client.request(method, format!("{}/api/v1/jobs/{job}/{tail}", self.url)).bearer_auth(token)
+    }
+}
+
+impl HeldJob {
+    /// POSTs or PUTs `tail` of this job with its token; the status.
+    pub async fn send(&self, runner: &FakeRunner, method: reqwest::Method, tail: &str, body: reqwest::Body) -> u16 {
+        runner.job_request(method, &self.id, &self.token, tail).body(body).send().await.unwrap().status().as_u16()
+    }
+
+    /// Reports the end of the job; the answer's status and body.
+    pub async fn finish(&self, runner: &FakeRunner, outcome: serde_json::Value) -> (u16, serde_json::Value) {
+        let response = runner
+            .job_request(reqwest::Method::POST, &self.id, &self.token, "finish")
+            .json(&outcome)
+            .send()
+            .await
+            .unwrap();
+        (response.status().as_u16(), response.json().await.unwrap_or_default())
+    }
+}
+
+/// Results a runner could upload: two scenes at 4 and 16 spp, metric
+/// values scaled by `quality` (smaller is better), images named like the
+/// SDK's results directory.
+pub fn results_upload(quality: f64) -> serde_json::Value {
+    let mut runs = Vec::new();
+    for (scene, base) in [("sin-bands", 0.01), ("defocus-checkerboard", 0.1)] {
+        for spp in [4u64, 16] {
+            runs.push(serde_json::json!({
+                "technique": "t", "scene": scene, "spp": spp, "status": "ok", "message": "",
+                "log": format!("{scene}/{spp}_0_log.json"), "image": format!("{scene}/{spp}_0.png"),
+                "technique_ms": 12.5, "render_ms": 100.0, "used_samples": spp * 64 * 64,
+                "metrics": { "MSE": base * quality / spp as f64, "SSIM": 1.0 - base * quality / spp as f64 }
+            }));
+        }
+    }
+    serde_json::json!({
+        "runs": runs,
+        "metrics": [
+            { "acronym": "MSE", "name": "Mean squared error", "reference": "", "lower_is_better": true, "has_error_map": true },
+            { "acronym": "SSIM", "name": "Structural similarity", "reference": "", "lower_is_better": false, "has_error_map": true }
+        ],
+        "scenes": [
+            { "name": "sin-bands", "tags": ["procedural"], "scene_hash": "sha256:aa", "reference_hash": "sha256:bb" },
+            { "name": "defocus-checkerboard", "tags": ["procedural", "dof"], "scene_hash": "sha256:cc", "reference_hash": "sha256:dd" }
+        ],
+        "provenance": { "image_digest": "sha256:0123", "runner": "fake", "machine": { "cpu_model": "test CPU", "cores": 2 } }
+    })
+}
+
+/// Uploads the files and results of [`results_upload`] for `job`.
+pub async fn upload_results(runner: &FakeRunner, job: &HeldJob, quality: f64) {
+    let upload = results_upload(quality);
+    for run in upload["runs"].as_array().unwrap() {
+        let name = run["image"].as_str().unwrap();
+        let status =
+            job.send(runner, reqwest::Method::PUT, &format!("files/{name}"), b"\x89PNG fake".to_vec().into()).await;
+        assert_eq!(status, 204, "upload of {name}");
+    }
+    let status = job.send(runner, reqwest::Method::PUT, "results", upload.to_string().into()).await;
+    assert_eq!(status, 204);
+}
+
 /// One test body, run once on SQLite and once on PostgreSQL.
 #[macro_export]
 macro_rules! on_both_databases {
     ($name:ident, $body:expr) => {
         mod $name {
             use super::*;
-            #[tokio::test]
+            #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn sqlite() {
                 ($body)(common::Db::Sqlite).await
             }
-            #[tokio::test]
+            #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
             async fn postgres() {
                 ($body)(common::Db::Postgres).await
             }

@@ -1,0 +1,397 @@
+//! The job queue: states, leases, logs and the per-job tokens runners
+//! report with.
+//!
+//! A job is `queued` until a runner claims it ([`claim`]): the claim sets
+//! it `running`, hands out a fresh job token and a lease. The runner
+//! heartbeats to extend the lease; when a lease expires ([`expire_leases`])
+//! the job is queued again, with a new token, until `max_attempts`, and
+//! then fails as an `infrastructure_error`. Claims are safe with many
+//! runners and several server instances: on PostgreSQL the claim locks the
+//! row with `FOR UPDATE SKIP LOCKED`; on SQLite writers are serialised and
+//! the update re-checks the state.
+
+use crate::error::ApiError;
+use crate::now_ms;
+use axum::http::StatusCode;
+use sqlx::{AnyPool, Row};
+
+/// What a job does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobKind {
+    /// Sanity checks and a sandboxed build (every push).
+    Build,
+    /// Build, then benchmark on the scene pool (`FBKSD_RUN`).
+    Benchmark,
+    /// Publish a result (`FBKSD_PUBLISH`): done by the server at once.
+    Publish,
+}
+
+impl JobKind {
+    /// The stored name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobKind::Build => "build",
+            JobKind::Benchmark => "benchmark",
+            JobKind::Publish => "publish",
+        }
+    }
+    fn parse(text: &str) -> JobKind {
+        match text {
+            "benchmark" => JobKind::Benchmark,
+            "publish" => JobKind::Publish,
+            _ => JobKind::Build,
+        }
+    }
+}
+
+/// Why a job failed: each comes with a message the user can act on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FailureReason {
+    /// The repository failed its checks or did not build.
+    BuildFailed,
+    /// A build or run exceeded its wall-time limit.
+    Timeout,
+    /// A container hit its memory limit.
+    OutOfMemory,
+    /// The technique died.
+    Crashed,
+    /// The technique's output was wrong (size, NaN, …).
+    InvalidOutput,
+    /// Not the user's fault: the runner, Docker or the server failed.
+    InfrastructureError,
+}
+
+impl FailureReason {
+    /// The stored name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FailureReason::BuildFailed => "build_failed",
+            FailureReason::Timeout => "timeout",
+            FailureReason::OutOfMemory => "out_of_memory",
+            FailureReason::Crashed => "crashed",
+            FailureReason::InvalidOutput => "invalid_output",
+            FailureReason::InfrastructureError => "infrastructure_error",
+        }
+    }
+}
+
+/// A job as pages and the API show it.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Job {
+    /// Random id.
+    pub id: String,
+    /// Its pipeline.
+    pub pipeline_id: String,
+    /// Its project's id.
+    pub project_id: String,
+    /// Its project's name.
+    pub project: String,
+    /// Who started the pipeline.
+    pub user_id: String,
+    /// Build, benchmark or publish.
+    pub kind: JobKind,
+    /// queued, running, succeeded, failed or cancelled.
+    pub state: String,
+    /// Why it failed.
+    pub failure_reason: Option<String>,
+    /// What happened, for the user.
+    pub message: String,
+    /// Attempts so far.
+    pub attempts: i64,
+    /// Attempts allowed.
+    pub max_attempts: i64,
+    /// The runner holding or last holding it.
+    pub runner_id: Option<String>,
+    /// The commit it builds.
+    pub commit_sha: String,
+    /// The leaderboard season it runs for.
+    pub season: i64,
+    /// Times, Unix ms.
+    pub created_at: i64,
+    /// When a runner first claimed it.
+    pub started_at: Option<i64>,
+    /// When it ended.
+    pub finished_at: Option<i64>,
+    /// The result set it produced (benchmarks).
+    pub result_id: Option<String>,
+}
+
+const JOB_COLUMNS: &str = "j.id, j.pipeline_id, j.project_id, p.name AS project_name, j.user_id, j.kind, j.state, \
+     j.failure_reason, j.message, j.attempts, j.max_attempts, j.runner_id, pl.commit_sha, j.season, j.created_at, \
+     j.started_at, j.finished_at, r.id AS result_id";
+const JOB_FROM: &str = "jobs j JOIN projects p ON p.id = j.project_id JOIN pipelines pl ON pl.id = j.pipeline_id \
+     LEFT JOIN result_sets r ON r.job_id = j.id";
+
+fn job_of(row: &sqlx::any::AnyRow) -> Result<Job, sqlx::Error> {
+    Ok(Job {
+        id: row.try_get("id")?,
+        pipeline_id: row.try_get("pipeline_id")?,
+        project_id: row.try_get("project_id")?,
+        project: row.try_get("project_name")?,
+        user_id: row.try_get("user_id")?,
+        kind: JobKind::parse(&row.try_get::<String, _>("kind")?),
+        state: row.try_get("state")?,
+        failure_reason: row.try_get("failure_reason")?,
+        message: row.try_get("message")?,
+        attempts: row.try_get("attempts")?,
+        max_attempts: row.try_get("max_attempts")?,
+        runner_id: row.try_get("runner_id")?,
+        commit_sha: row.try_get("commit_sha")?,
+        season: row.try_get("season")?,
+        created_at: row.try_get("created_at")?,
+        started_at: row.try_get("started_at")?,
+        finished_at: row.try_get("finished_at")?,
+        result_id: row.try_get("result_id")?,
+    })
+}
+
+/// The job with id `id`, if any.
+pub async fn get(pool: &AnyPool, id: &str) -> Result<Option<Job>, sqlx::Error> {
+    let row = sqlx::query(&format!("SELECT {JOB_COLUMNS} FROM {JOB_FROM} WHERE j.id = $1"))
+        .bind(id)
+        .fetch_optional(pool)
+        .await?;
+    row.as_ref().map(job_of).transpose()
+}
+
+/// A project's jobs, newest first.
+pub async fn of_project(pool: &AnyPool, project_id: &str, limit: i64) -> Result<Vec<Job>, sqlx::Error> {
+    let rows = sqlx::query(&format!(
+        "SELECT {JOB_COLUMNS} FROM {JOB_FROM} WHERE j.project_id = $1 ORDER BY j.created_at DESC, j.id LIMIT $2"
+    ))
+    .bind(project_id)
+    .bind(limit)
+    .fetch_all(pool)
+    .await?;
+    rows.iter().map(job_of).collect()
+}
+
+/// Every job, newest first (administration).
+pub async fn all(pool: &AnyPool, limit: i64) -> Result<Vec<Job>, sqlx::Error> {
+    let rows = sqlx::query(&format!("SELECT {JOB_COLUMNS} FROM {JOB_FROM} ORDER BY j.created_at DESC, j.id LIMIT $1"))
+        .bind(limit)
+        .fetch_all(pool)
+        .await?;
+    rows.iter().map(job_of).collect()
+}
+
+/// Prefix of job tokens (distinct from personal `fbksd_` and runner `fbksdr_` tokens).
+pub const JOB_TOKEN_PREFIX: &str = "fbksdj_";
+
+/// A claimed job: the job and the token its runner reports with.
+pub struct Claimed {
+    /// The job.
+    pub job: Job,
+    /// Valid for this attempt only.
+    pub token: String,
+}
+
+/// Hands the oldest queued build or benchmark job to `runner_id`, if any.
+pub async fn claim(
+    pool: &AnyPool,
+    postgres: bool,
+    runner_id: &str,
+    lease_ms: i64,
+) -> Result<Option<Claimed>, sqlx::Error> {
+    let token = format!("{JOB_TOKEN_PREFIX}{}", crate::accounts::random_token());
+    let now = now_ms();
+    let lock = if postgres { " FOR UPDATE SKIP LOCKED" } else { "" };
+    let row = sqlx::query(&format!(
+        "UPDATE jobs SET state = 'running', runner_id = $1, token_hash = $2, lease_expires_at = $3, \
+         attempts = attempts + 1, started_at = COALESCE(started_at, $4) \
+         WHERE state = 'queued' AND id = (SELECT id FROM jobs WHERE state = 'queued' AND kind <> 'publish' \
+         ORDER BY created_at, id LIMIT 1{lock}) RETURNING id"
+    ))
+    .bind(runner_id)
+    .bind(crate::accounts::digest(&token))
+    .bind(now + lease_ms)
+    .bind(now)
+    .fetch_optional(pool)
+    .await?;
+    let Some(row) = row else { return Ok(None) };
+    let id: String = row.try_get("id")?;
+    let job = get(pool, &id).await?.ok_or(sqlx::Error::RowNotFound)?;
+    append_log(
+        pool,
+        &id,
+        job.attempts,
+        &format!("[fbksd] attempt {} of {}: runner {runner_id}\n", job.attempts, job.max_attempts),
+        i64::MAX,
+    )
+    .await?;
+    Ok(Some(Claimed { job, token }))
+}
+
+/// The running job a job token belongs to: (job id, attempt).
+pub async fn token_job(pool: &AnyPool, token: &str) -> Result<Option<(String, String, i64)>, sqlx::Error> {
+    if !token.starts_with(JOB_TOKEN_PREFIX) {
+        return Ok(None);
+    }
+    let row = sqlx::query("SELECT id, state, attempts FROM jobs WHERE token_hash = $1")
+        .bind(crate::accounts::digest(token))
+        .fetch_optional(pool)
+        .await?;
+    row.map(|r| Ok((r.try_get("id")?, r.try_get("state")?, r.try_get("attempts")?))).transpose()
+}
+
+/// Extends a running job's lease.
+pub async fn heartbeat(pool: &AnyPool, job_id: &str, lease_ms: i64) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE jobs SET lease_expires_at = $1 WHERE id = $2 AND state = 'running'")
+        .bind(now_ms() + lease_ms)
+        .bind(job_id)
+        .execute(pool)
+        .await?;
+    Ok(())
+}
+
+/// Appends to a job's log unless it would pass `max_bytes`; returns
+/// whether it was appended.
+pub async fn append_log(
+    pool: &AnyPool,
+    job_id: &str,
+    attempt: i64,
+    text: &str,
+    max_bytes: i64,
+) -> Result<bool, sqlx::Error> {
+    let mut tx = pool.begin().await?;
+    let grown = sqlx::query("UPDATE jobs SET log_bytes = log_bytes + $1 WHERE id = $2 AND log_bytes + $1 <= $3")
+        .bind(text.len() as i64)
+        .bind(job_id)
+        .bind(max_bytes)
+        .execute(&mut *tx)
+        .await?;
+    if grown.rows_affected() == 0 {
+        return Ok(false);
+    }
+    let next = sqlx::query("SELECT COALESCE(MAX(seq), 0) + 1 AS next FROM job_logs WHERE job_id = $1")
+        .bind(job_id)
+        .fetch_one(&mut *tx)
+        .await?;
+    sqlx::query("INSERT INTO job_logs (job_id, seq, attempt, content, created_at) VALUES ($1, $2, $3, $4, $5)")
+        .bind(job_id)
+        .bind(next.try_get::<i64, _>("next")?)
+        .bind(attempt)
+        .bind(text)
+        .bind(now_ms())
+        .execute(&mut *tx)
+        .await?;
+    tx.commit().await?;
+    Ok(true)
+}
+
+/// A job's log chunks after `after` (a sequence number): (seq, text).
+pub async fn log_since(pool: &AnyPool, job_id: &str, after: i64) -> Result<Vec<(i64, String)>, sqlx::Error> {
+    let rows = sqlx::query("SELECT seq, content FROM job_logs WHERE job_id = $1 AND seq > $2 ORDER BY seq")
+        .bind(job_id)
+        .bind(after)
+        .fetch_all(pool)
+        .await?;
+    rows.iter().map(|r| Ok((r.try_get("seq")?, r.try_get("content")?))).collect()
+}
+
+/// Queues again, or fails, every running job whose lease has expired;
+/// returns how many were touched.
+pub async fn expire_leases(pool: &AnyPool) -> Result<usize, sqlx::Error> {
+    let now = now_ms();
+    let rows = sqlx::query(
+        "SELECT id, attempts, max_attempts, runner_id FROM jobs WHERE state = 'running' AND lease_expires_at < $1",
+    )
+    .bind(now)
+    .fetch_all(pool)
+    .await?;
+    let mut touched = 0;
+    for row in rows {
+        let id: String = row.try_get("id")?;
+        let attempts: i64 = row.try_get("attempts")?;
+        let max: i64 = row.try_get("max_attempts")?;
+        let runner: Option<String> = row.try_get("runner_id")?;
+        let runner = runner.unwrap_or_default();
+        // Conditional on the lease still being expired: another server instance may have done it.
+        let (sql, note) = if attempts < max {
+            (
+                "UPDATE jobs SET state = 'queued', token_hash = NULL, lease_expires_at = NULL \
+                 WHERE id = $1 AND state = 'running' AND lease_expires_at < $2",
+                format!("[fbksd] runner {runner} stopped reporting (lease expired): the job is queued again\n"),
+            )
+        } else {
+            (
+                "UPDATE jobs SET state = 'failed', failure_reason = 'infrastructure_error', token_hash = NULL, \
+                 lease_expires_at = NULL, counts_for_quota = 0, finished_at = $2, \
+                 message = 'runners stopped reporting on this job too many times; it does not count against your quota: run it again' \
+                 WHERE id = $1 AND state = 'running' AND lease_expires_at < $2",
+                format!("[fbksd] runner {runner} stopped reporting (lease expired) on the last attempt: the job failed\n"),
+            )
+        };
+        let done = sqlx::query(sql).bind(&id).bind(now).execute(pool).await?;
+        if done.rows_affected() > 0 {
+            append_log(pool, &id, attempts, &note, i64::MAX).await?;
+            touched += 1;
+        }
+    }
+    Ok(touched)
+}
+
+/// Cancels a queued or running job; a job cancelled before it started does
+/// not count against the quota.
+pub async fn cancel(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ApiError> {
+    let done = sqlx::query(
+        "UPDATE jobs SET state = 'cancelled', token_hash = NULL, lease_expires_at = NULL, finished_at = $1, \
+         message = $2, counts_for_quota = CASE WHEN started_at IS NULL THEN 0 ELSE counts_for_quota END \
+         WHERE id = $3 AND state IN ('queued', 'running')",
+    )
+    .bind(now_ms())
+    .bind(format!("cancelled by {by}"))
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    if done.rows_affected() == 0 {
+        return Err(ApiError::new(StatusCode::CONFLICT, "job_finished", "the job has already ended"));
+    }
+    append_log(pool, job_id, 0, &format!("[fbksd] cancelled by {by}\n"), i64::MAX).await?;
+    Ok(())
+}
+
+/// Queues a job again (administration): a new attempt budget, a new token.
+pub async fn requeue(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ApiError> {
+    let done = sqlx::query(
+        "UPDATE jobs SET state = 'queued', token_hash = NULL, lease_expires_at = NULL, finished_at = NULL, \
+         failure_reason = NULL, message = '', attempts = 0, staged_results = NULL, upload_bytes = 0 \
+         WHERE id = $1 AND kind <> 'publish' AND NOT EXISTS (SELECT 1 FROM result_sets r WHERE r.job_id = $1)",
+    )
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    if done.rows_affected() == 0 {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "not_requeueable",
+            "this job cannot be queued again (it published or produced a result set)",
+        ));
+    }
+    append_log(pool, job_id, 0, &format!("[fbksd] queued again by {by}\n"), i64::MAX).await?;
+    Ok(())
+}
+
+/// Queued jobs of a user.
+pub async fn queued_count(pool: &AnyPool, user_id: &str) -> Result<i64, sqlx::Error> {
+    let row = sqlx::query("SELECT COUNT(*) AS n FROM jobs WHERE user_id = $1 AND state = 'queued'")
+        .bind(user_id)
+        .fetch_one(pool)
+        .await?;
+    row.try_get("n")
+}
+
+/// Benchmark runs of a user in the last 24 hours that count for the quota.
+pub async fn runs_today(pool: &AnyPool, user_id: &str) -> Result<i64, sqlx::Error> {
+    let row = sqlx::query(
+        "SELECT COUNT(*) AS n FROM jobs WHERE user_id = $1 AND kind = 'benchmark' AND counts_for_quota = 1 \
+         AND created_at > $2",
+    )
+    .bind(user_id)
+    .bind(now_ms() - 24 * 3600 * 1000)
+    .fetch_one(pool)
+    .await?;
+    row.try_get("n")
+}

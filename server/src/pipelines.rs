@@ -1,0 +1,468 @@
+//! Pipelines: what a push, a form or an API call asks for at one commit,
+//! and the jobs that do it.
+//!
+//! - no variable: a `build` job (every push);
+//! - `FBKSD_RUN`: a `benchmark` job, which builds and then benchmarks;
+//! - `FBKSD_PUBLISH=<uuid>`: publishes one of the owner's result sets, at
+//!   once, as a `publish` job the server does itself.
+//!
+//! The sanity checks of the repository (info.json schema, build file,
+//! environment) run here, at once, so a broken repository fails in a
+//! second with the problem named, without waiting for a runner. Failures
+//! are e-mailed to the author.
+
+use crate::accounts::User;
+use crate::error::ApiError;
+use crate::jobs::{FailureReason, JobKind};
+use crate::projects::Project;
+use crate::{now_ms, AppState};
+use axum::http::StatusCode;
+use fbksd_manager::technique::TechniqueInfo;
+use sqlx::Row;
+
+/// What a pipeline's variables ask for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Request {
+    /// Build only.
+    Build,
+    /// Build and benchmark.
+    Run,
+    /// Publish this result set.
+    Publish(uuid::Uuid),
+}
+
+impl Request {
+    /// Parses variables given as `(name, value)`; unknown names and bad
+    /// values are refused with the allowed ones named.
+    pub fn parse<'a>(variables: impl IntoIterator<Item = (&'a str, &'a str)>) -> Result<Request, ApiError> {
+        let mut request = Request::Build;
+        for (name, value) in variables {
+            let next = match name {
+                "FBKSD_RUN" => Request::Run,
+                "FBKSD_PUBLISH" => match uuid::Uuid::parse_str(value.trim()) {
+                    Ok(key) => Request::Publish(key),
+                    Err(_) => {
+                        return Err(ApiError::bad_request(
+                            "invalid_variable",
+                            format!(
+                                "FBKSD_PUBLISH needs the UUID of one of your results (the key in its /results/<uuid> \
+                                 URL), not {value:?}"
+                            ),
+                        ))
+                    }
+                },
+                other => {
+                    return Err(ApiError::bad_request(
+                        "unknown_variable",
+                        format!("unknown variable {other:?}: the server knows FBKSD_RUN and FBKSD_PUBLISH=<uuid>"),
+                    ))
+                }
+            };
+            if request != Request::Build && request != next {
+                return Err(ApiError::bad_request(
+                    "conflicting_variables",
+                    "FBKSD_RUN and FBKSD_PUBLISH cannot be combined: run first, then publish the result's UUID",
+                ));
+            }
+            request = next;
+        }
+        Ok(request)
+    }
+
+    /// Parses push options (`NAME` or `NAME=value`).
+    pub fn from_push_options(options: &[String]) -> Result<Request, ApiError> {
+        Request::parse(options.iter().map(|o| o.split_once('=').unwrap_or((o.as_str(), ""))))
+    }
+
+    fn variables(&self) -> serde_json::Value {
+        match self {
+            Request::Build => serde_json::json!({}),
+            Request::Run => serde_json::json!({ "FBKSD_RUN": "1" }),
+            Request::Publish(key) => serde_json::json!({ "FBKSD_PUBLISH": key.to_string() }),
+        }
+    }
+}
+
+/// Where a pipeline came from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Source {
+    /// `git push` (the push has landed: problems become failed jobs).
+    Push,
+    /// The API or a form (problems are refused before anything is written).
+    Api,
+    /// A new leaderboard season re-runs a published technique.
+    Season,
+}
+
+impl Source {
+    fn as_str(self) -> &'static str {
+        match self {
+            Source::Push => "push",
+            Source::Api => "api",
+            Source::Season => "season",
+        }
+    }
+}
+
+/// A created pipeline and its job.
+#[derive(Debug, serde::Serialize)]
+pub struct Started {
+    /// Pipeline id.
+    pub pipeline_id: String,
+    /// Its job.
+    pub job: crate::jobs::Job,
+}
+
+/// Checks the repository at `commit`: its parsed info.json, or what is wrong.
+pub async fn sanity_check(state: &AppState, project: &Project, commit: &str) -> Result<TechniqueInfo, String> {
+    let files = state.git.files(&project.id, commit).await.map_err(|e| e.to_string())?;
+    let text = state
+        .git
+        .read(&project.id, commit, "info.json", 64 * 1024)
+        .await?
+        .ok_or("the repository has no info.json at its root: see the SDK's example techniques")?;
+    TechniqueInfo::parse(&text, &files)
+}
+
+/// Starts a pipeline at `commit` for `user` (the project's owner).
+pub async fn start(
+    state: &AppState,
+    project: &Project,
+    user: &User,
+    commit: &str,
+    git_ref: &str,
+    request: Request,
+    source: Source,
+) -> Result<Started, ApiError> {
+    // Decide everything before writing, so a refusal writes nothing.
+    let season = crate::results::current_season(&state.pool).await?;
+    let (kind, mut failure, mut cancelled) = (
+        match request {
+            Request::Build => JobKind::Build,
+            Request::Run => JobKind::Benchmark,
+            Request::Publish(_) => JobKind::Publish,
+        },
+        None::<(FailureReason, String)>,
+        None::<String>,
+    );
+    let mut message = String::new();
+    match &request {
+        Request::Build | Request::Run => {
+            if let Err(problem) = sanity_check(state, project, commit).await {
+                if source == Source::Api {
+                    return Err(ApiError::bad_request("invalid_repository", problem));
+                }
+                failure = Some((FailureReason::BuildFailed, problem));
+            }
+        }
+        Request::Publish(key) => {
+            let published = async {
+                let set = crate::results::owned(&state.pool, &key.to_string(), &user.id).await?;
+                if set.project.as_deref() != Some(project.name.as_str()) {
+                    return Err(ApiError::bad_request(
+                        "wrong_project",
+                        format!("result {key} belongs to another project"),
+                    ));
+                }
+                crate::results::publish(&state.pool, &set).await
+            }
+            .await;
+            match published {
+                Ok(()) => message = format!("published {}/results/{key}", state.public_url),
+                Err(e) if source == Source::Api => return Err(e),
+                Err(e) => failure = Some((FailureReason::BuildFailed, e.message)),
+            }
+        }
+    }
+    if request == Request::Run && failure.is_none() && source != Source::Season {
+        if let Err(e) = check_quota(state, &user.id).await {
+            if source == Source::Api {
+                return Err(e);
+            }
+            cancelled = Some(format!("not run: {}", e.message));
+        }
+    }
+
+    let (job_state, reason, finished) = match (&failure, &cancelled, kind) {
+        (Some((reason, problem)), _, _) => {
+            message = problem.clone();
+            ("failed", Some(reason.as_str()), Some(now_ms()))
+        }
+        (None, Some(why), _) => {
+            message = why.clone();
+            ("cancelled", None, Some(now_ms()))
+        }
+        (None, None, JobKind::Publish) => ("succeeded", None, Some(now_ms())),
+        (None, None, _) => ("queued", None, None),
+    };
+    let (pipeline_id, job_id) = (uuid::Uuid::new_v4().to_string(), uuid::Uuid::new_v4().to_string());
+    let now = now_ms();
+    let mut tx = state.pool.begin().await?;
+    sqlx::query(
+        "INSERT INTO pipelines (id, project_id, user_id, commit_sha, git_ref, variables, source, created_at) \
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
+    )
+    .bind(&pipeline_id)
+    .bind(&project.id)
+    .bind(&user.id)
+    .bind(commit)
+    .bind(git_ref)
+    .bind(request.variables().to_string())
+    .bind(source.as_str())
+    .bind(now)
+    .execute(&mut *tx)
+    .await?;
+    sqlx::query(
+        "INSERT INTO jobs (id, pipeline_id, project_id, user_id, kind, state, failure_reason, message, attempts, \
+         max_attempts, season, publish_on_success, counts_for_quota, log_bytes, upload_bytes, created_at, finished_at) \
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14)",
+    )
+    .bind(&job_id)
+    .bind(&pipeline_id)
+    .bind(&project.id)
+    .bind(&user.id)
+    .bind(kind.as_str())
+    .bind(job_state)
+    .bind(reason)
+    .bind(&message)
+    .bind(state.config.max_attempts as i64)
+    .bind(season)
+    .bind((source == Source::Season) as i64)
+    .bind((kind == JobKind::Benchmark && job_state != "cancelled" && source != Source::Season) as i64)
+    .bind(now)
+    .bind(finished)
+    .execute(&mut *tx)
+    .await?;
+    tx.commit().await?;
+
+    let first_line = match job_state {
+        "queued" => format!("[fbksd] {} of {commit} queued ({})\n", kind.as_str(), source.as_str()),
+        _ => format!("[fbksd] {job_state}: {message}\n"),
+    };
+    crate::jobs::append_log(&state.pool, &job_id, 0, &first_line, i64::MAX).await?;
+    state.job_queued.notify_waiters();
+    let job = crate::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ApiError::internal("job vanished"))?;
+    if job_state == "failed" {
+        mail_failure(state, user, &job).await;
+    }
+    Ok(Started { pipeline_id, job })
+}
+
+/// Refuses a run over the user's quotas.
+async fn check_quota(state: &AppState, user_id: &str) -> Result<(), ApiError> {
+    let queued = crate::jobs::queued_count(&state.pool, user_id).await?;
+    if queued >= state.config.max_queued_jobs_per_user as i64 {
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            "quota_queued",
+            format!(
+                "you have {queued} jobs queued (the limit is {}): wait for them to run",
+                state.config.max_queued_jobs_per_user
+            ),
+        ));
+    }
+    let today = crate::jobs::runs_today(&state.pool, user_id).await?;
+    if today >= state.config.max_runs_per_day as i64 {
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            "quota_runs",
+            format!(
+                "you have used your {} benchmark runs of the last 24 hours; runs that failed for infrastructure \
+                 reasons or were cancelled before starting do not count",
+                state.config.max_runs_per_day
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Mails the author that a job failed (failures to send are logged, not fatal).
+pub async fn mail_failure(state: &AppState, user: &User, job: &crate::jobs::Job) {
+    let body = format!(
+        "Your {} job of {} at commit {} failed ({}):\n\n{}\n\nLog: {}/jobs/{}\n",
+        job.kind.as_str(),
+        job.project,
+        &job.commit_sha[..job.commit_sha.len().min(12)],
+        job.failure_reason.as_deref().unwrap_or("failed"),
+        job.message,
+        state.public_url,
+        job.id
+    );
+    let subject = format!("[FBKSD] {} {} failed", job.project, job.kind.as_str());
+    if let Err(e) = state.mailer.send(&state.config.mail_from, &user.email, &subject, body).await {
+        tracing::warn!("mail to {}: {e}", user.email);
+    }
+}
+
+/// How a runner says a job ended.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Outcome {
+    /// `succeeded` or `failed`.
+    pub state: String,
+    /// For failures.
+    pub reason: Option<FailureReason>,
+    /// What happened, for the user.
+    #[serde(default)]
+    pub message: String,
+}
+
+/// Ends a running job as its runner reports; a successful benchmark stores
+/// its result set. Returns the result set's UUID, if one was stored.
+pub async fn finish(
+    state: &AppState,
+    job_id: &str,
+    attempt: i64,
+    outcome: Outcome,
+) -> Result<Option<String>, ApiError> {
+    let job = crate::jobs::get(&state.pool, job_id).await?.ok_or_else(|| ApiError::internal("job vanished"))?;
+    let owner = crate::accounts::user_by_id(&state.pool, &job.user_id).await?;
+    match (outcome.state.as_str(), outcome.reason) {
+        ("succeeded", _) if job.kind == JobKind::Benchmark => {
+            let result_id = store_results(state, &job).await?;
+            let url = format!("{}/results/{result_id}", state.public_url);
+            crate::jobs::append_log(&state.pool, job_id, attempt, &format!("[fbksd] private results: {url}\n"), i64::MAX)
+                .await?;
+            if let Some(owner) = owner {
+                let body = format!(
+                    "The benchmark of {} at commit {} is done.\n\nYour private results: {url}\n\n\
+                     Publish them from that page, or with FBKSD_PUBLISH={result_id}.\n",
+                    job.project, job.commit_sha
+                );
+                let subject = format!("[FBKSD] {} results", job.project);
+                if let Err(e) = state.mailer.send(&state.config.mail_from, &owner.email, &subject, body).await {
+                    tracing::warn!("mail: {e}");
+                }
+            }
+            Ok(Some(result_id))
+        }
+        ("succeeded", _) => {
+            end(state, job_id, "succeeded", None, &outcome.message, true).await?;
+            Ok(None)
+        }
+        ("failed", Some(FailureReason::InfrastructureError)) if job.attempts < job.max_attempts => {
+            // Not the user's fault: another runner tries again.
+            sqlx::query(
+                "UPDATE jobs SET state = 'queued', token_hash = NULL, lease_expires_at = NULL, staged_results = NULL, \
+                 upload_bytes = 0 WHERE id = $1 AND state = 'running'",
+            )
+            .bind(job_id)
+            .execute(&state.pool)
+            .await?;
+            let note = format!("[fbksd] infrastructure error: {}; the job is queued again\n", outcome.message);
+            crate::jobs::append_log(&state.pool, job_id, attempt, &note, i64::MAX).await?;
+            state.job_queued.notify_waiters();
+            Ok(None)
+        }
+        ("failed", Some(reason)) => {
+            let counts = reason != FailureReason::InfrastructureError;
+            end(state, job_id, "failed", Some(reason), &outcome.message, counts).await?;
+            if let (Some(owner), Some(job)) = (owner, crate::jobs::get(&state.pool, job_id).await?) {
+                mail_failure(state, &owner, &job).await;
+            }
+            Ok(None)
+        }
+        ("failed", None) => Err(ApiError::bad_request(
+            "missing_reason",
+            "a failed job needs a reason: build_failed, timeout, out_of_memory, crashed, invalid_output or infrastructure_error",
+        )),
+        (other, _) => Err(ApiError::bad_request("invalid_state", format!("state {other:?}: use succeeded or failed"))),
+    }
+}
+
+async fn end(
+    state: &AppState,
+    job_id: &str,
+    job_state: &str,
+    reason: Option<FailureReason>,
+    message: &str,
+    counts: bool,
+) -> Result<(), ApiError> {
+    sqlx::query(
+        "UPDATE jobs SET state = $1, failure_reason = $2, message = $3, finished_at = $4, token_hash = NULL, \
+         lease_expires_at = NULL, counts_for_quota = CASE WHEN $5 = 1 THEN counts_for_quota ELSE 0 END \
+         WHERE id = $6 AND state = 'running'",
+    )
+    .bind(job_state)
+    .bind(reason.map(|r| r.as_str()))
+    .bind(message)
+    .bind(now_ms())
+    .bind(counts as i64)
+    .bind(job_id)
+    .execute(&state.pool)
+    .await?;
+    let line = match reason {
+        Some(r) => format!("[fbksd] failed ({}): {message}\n", r.as_str()),
+        None => format!("[fbksd] {job_state}\n"),
+    };
+    crate::jobs::append_log(&state.pool, job_id, 0, &line, i64::MAX).await?;
+    Ok(())
+}
+
+/// Turns a benchmark job's staged upload into a result set, in one
+/// transaction with the job's end; then moves its files into place.
+async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<String, ApiError> {
+    let row = sqlx::query("SELECT staged_results, publish_on_success FROM jobs WHERE id = $1")
+        .bind(&job.id)
+        .fetch_one(&state.pool)
+        .await?;
+    let staged: Option<String> = row.try_get("staged_results")?;
+    let staged = staged.ok_or_else(|| {
+        ApiError::new(StatusCode::CONFLICT, "no_results", "upload the results (PUT …/results) before reporting success")
+    })?;
+    let upload: crate::results::Upload = serde_json::from_str(&staged).map_err(ApiError::internal)?;
+    let info = match sanity_check(
+        state,
+        &crate::projects::by_id(&state.pool, &job.project_id)
+            .await?
+            .ok_or_else(|| ApiError::internal("project vanished"))?,
+        &job.commit_sha,
+    )
+    .await
+    {
+        Ok(info) => serde_json::to_value(&info).map_err(ApiError::internal)?,
+        Err(problem) => return Err(ApiError::new(StatusCode::CONFLICT, "invalid_repository", problem)),
+    };
+    let staging = crate::results::staging_dir(&state.config.data_dir, &job.id);
+    let mut tx = state.pool.begin().await?;
+    let id = crate::results::insert(
+        &mut tx,
+        &crate::results::NewResultSet {
+            job_id: &job.id,
+            project_id: &job.project_id,
+            user_id: &job.user_id,
+            technique: &job.project,
+            info: &info,
+            commit_sha: &job.commit_sha,
+            season: job.season,
+            publish: row.try_get::<i64, _>("publish_on_success")? != 0,
+            upload: &upload,
+        },
+    )
+    .await?;
+    let ended = sqlx::query(
+        "UPDATE jobs SET state = 'succeeded', finished_at = $1, token_hash = NULL, lease_expires_at = NULL, \
+         staged_results = NULL, message = $2 WHERE id = $3 AND state = 'running'",
+    )
+    .bind(now_ms())
+    .bind(format!("results: /results/{id}"))
+    .bind(&job.id)
+    .execute(&mut *tx)
+    .await?;
+    if ended.rows_affected() == 0 {
+        return Err(ApiError::new(StatusCode::GONE, "job_not_running", "the job is no longer running"));
+    }
+    // Files first, then the commit: a failure leaves no result set without its files.
+    let target = crate::results::files_dir(&state.config.data_dir, &id);
+    if staging.exists() {
+        if let Some(parent) = target.parent() {
+            tokio::fs::create_dir_all(parent).await.map_err(ApiError::internal)?;
+        }
+        tokio::fs::rename(&staging, &target).await.map_err(ApiError::internal)?;
+    }
+    if let Err(e) = tx.commit().await {
+        let _ = tokio::fs::rename(&target, &staging).await;
+        return Err(e.into());
+    }
+    Ok(id)
+}

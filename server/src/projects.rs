@@ -1,0 +1,189 @@
+//! Projects: a technique's hosted git repository, its owner and its
+//! visibility, and who may read or push it.
+
+use crate::accounts::User;
+use crate::error::ApiError;
+use crate::now_ms;
+use axum::http::StatusCode;
+use sqlx::{AnyPool, Row};
+
+/// Who can see a project (its repository, pipelines and technique page).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Visibility {
+    /// The owner (and administrators).
+    Private,
+    /// Every logged-in user.
+    Internal,
+    /// Everyone.
+    Public,
+}
+
+impl Visibility {
+    /// Parses `private`, `internal` or `public`.
+    pub fn parse(text: &str) -> Result<Visibility, ApiError> {
+        match text {
+            "private" => Ok(Visibility::Private),
+            "internal" => Ok(Visibility::Internal),
+            "public" => Ok(Visibility::Public),
+            other => Err(ApiError::bad_request(
+                "invalid_visibility",
+                format!("visibility {other:?} is unknown: use private, internal or public"),
+            )),
+        }
+    }
+    /// The stored name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Visibility::Private => "private",
+            Visibility::Internal => "internal",
+            Visibility::Public => "public",
+        }
+    }
+}
+
+/// A project name: the same rules as a technique's `short_name`.
+pub struct ProjectName(String);
+
+impl ProjectName {
+    /// Checks the rules.
+    pub fn parse(text: &str) -> Result<ProjectName, ApiError> {
+        if fbksd_manager::technique::is_valid_short_name(text) {
+            Ok(ProjectName(text.to_string()))
+        } else {
+            Err(ApiError::bad_request(
+                "invalid_name",
+                format!("project name {text:?} must be 1 to 64 lower-case letters, digits, '-' or '_'"),
+            ))
+        }
+    }
+}
+
+/// A project.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Project {
+    /// Random id (also the repository's directory name).
+    pub id: String,
+    /// Unique name, in URLs.
+    pub name: String,
+    /// Owner's user id.
+    pub owner_id: String,
+    /// Who can see it.
+    pub visibility: Visibility,
+    /// Creation time, Unix ms.
+    pub created_at: i64,
+}
+
+impl Project {
+    /// Whether `user` (None: anonymous) may read the project.
+    pub fn readable_by(&self, user: Option<&User>) -> bool {
+        match (self.visibility, user) {
+            (Visibility::Public, _) => true,
+            (Visibility::Internal, Some(_)) => true,
+            (Visibility::Private, Some(u)) => u.id == self.owner_id || u.is_admin,
+            _ => false,
+        }
+    }
+    /// Whether `user` may push, run pipelines and change the project.
+    pub fn writable_by(&self, user: &User) -> bool {
+        user.id == self.owner_id
+    }
+}
+
+fn project_of(row: &sqlx::any::AnyRow) -> Result<Project, sqlx::Error> {
+    let visibility: String = row.try_get("visibility")?;
+    Ok(Project {
+        id: row.try_get("id")?,
+        name: row.try_get("name")?,
+        owner_id: row.try_get("owner_id")?,
+        visibility: Visibility::parse(&visibility).unwrap_or(Visibility::Private),
+        created_at: row.try_get("created_at")?,
+    })
+}
+
+const COLUMNS: &str = "id, name, owner_id, visibility, created_at";
+
+/// Inserts a project row (the caller creates its repository).
+pub async fn insert(
+    pool: &AnyPool,
+    owner: &User,
+    name: &ProjectName,
+    visibility: Visibility,
+) -> Result<Project, ApiError> {
+    let project = Project {
+        id: uuid::Uuid::new_v4().to_string(),
+        name: name.0.clone(),
+        owner_id: owner.id.clone(),
+        visibility,
+        created_at: now_ms(),
+    };
+    let inserted =
+        sqlx::query("INSERT INTO projects (id, name, owner_id, visibility, created_at) VALUES ($1, $2, $3, $4, $5)")
+            .bind(&project.id)
+            .bind(&project.name)
+            .bind(&project.owner_id)
+            .bind(visibility.as_str())
+            .bind(project.created_at)
+            .execute(pool)
+            .await;
+    match inserted {
+        Ok(_) => Ok(project),
+        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "name_taken",
+            format!("a project named {:?} exists: choose another name", project.name),
+        )),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The project named `name`, if any.
+pub async fn by_name(pool: &AnyPool, name: &str) -> Result<Option<Project>, sqlx::Error> {
+    let row =
+        sqlx::query(&format!("SELECT {COLUMNS} FROM projects WHERE name = $1")).bind(name).fetch_optional(pool).await?;
+    row.as_ref().map(project_of).transpose()
+}
+
+/// The project with id `id`, if any.
+pub async fn by_id(pool: &AnyPool, id: &str) -> Result<Option<Project>, sqlx::Error> {
+    let row =
+        sqlx::query(&format!("SELECT {COLUMNS} FROM projects WHERE id = $1")).bind(id).fetch_optional(pool).await?;
+    row.as_ref().map(project_of).transpose()
+}
+
+/// The project named `name` if `user` may read it; otherwise 404, so
+/// private names do not leak.
+pub async fn readable(pool: &AnyPool, name: &str, user: Option<&User>) -> Result<Project, ApiError> {
+    match by_name(pool, name).await? {
+        Some(p) if p.readable_by(user) => Ok(p),
+        _ => Err(not_found(name)),
+    }
+}
+
+/// The project named `name` if `user` may change it (403 if they may only read it).
+pub async fn writable(pool: &AnyPool, name: &str, user: &User) -> Result<Project, ApiError> {
+    let project = readable(pool, name, Some(user)).await?;
+    if project.writable_by(user) {
+        Ok(project)
+    } else {
+        Err(ApiError::forbidden("not_owner", format!("only the owner of {name} can do this")))
+    }
+}
+
+/// 404 for a project.
+pub fn not_found(name: &str) -> ApiError {
+    ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no project named {name:?} that you can see"))
+}
+
+/// Projects `user` can see (all of theirs, and others' internal and public ones), by name.
+pub async fn visible(pool: &AnyPool, user: Option<&User>) -> Result<Vec<Project>, sqlx::Error> {
+    let rows = sqlx::query(&format!("SELECT {COLUMNS} FROM projects ORDER BY name")).fetch_all(pool).await?;
+    let projects: Result<Vec<Project>, _> = rows.iter().map(project_of).collect();
+    Ok(projects?.into_iter().filter(|p| p.readable_by(user)).collect())
+}
+
+/// Ids of a user's projects (to delete their repositories with the account).
+pub async fn ids_of_owner(pool: &AnyPool, owner_id: &str) -> Result<Vec<String>, sqlx::Error> {
+    let rows = sqlx::query("SELECT id FROM projects WHERE owner_id = $1").bind(owner_id).fetch_all(pool).await?;
+    rows.iter().map(|r| r.try_get("id")).collect()
+}

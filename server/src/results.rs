@@ -1,0 +1,457 @@
+//! Result sets: what a successful benchmark job uploaded, stored once and
+//! never changed, under a random UUID. Publishing puts a set on its
+//! season's leaderboard (one published set per technique and season);
+//! unpublishing takes it off; discarding deletes it; an administrator can
+//! hide a set that breaks the rules.
+//!
+//! # Upload format (`PUT /api/v1/jobs/<id>/results`)
+//!
+//! ```json
+//! {
+//!   "runs": [ <fbksd-results index entries: technique, scene, spp, status, message,
+//!             log, image, technique_ms, render_ms, used_samples, metrics> ],
+//!   "metrics": [ {"acronym": "MSE", "name": "…", "reference": "…",
+//!                 "lower_is_better": true, "has_error_map": true} ],
+//!   "scenes": [ {"name": "…", "tags": ["…"], "scene_hash": "…", "reference_hash": "…"} ],
+//!   "provenance": { "image_digest": "…", "machine": {…}, … }
+//! }
+//! ```
+//! Runs are the `fbksd results` index entries, so a local results
+//! directory and a server result set speak one format. A run's `image`
+//! names a file uploaded with `PUT /api/v1/jobs/<id>/files/<name>`.
+
+use crate::error::ApiError;
+use crate::now_ms;
+use axum::http::StatusCode;
+use fbksd_iqa::MetricInfo;
+use fbksd_manager::results::IndexEntry;
+use serde::{Deserialize, Serialize};
+use sqlx::{AnyPool, Row};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// A scene a result set was measured on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneProvenance {
+    /// Scene name.
+    pub name: String,
+    /// Its tags (filters on the leaderboard).
+    #[serde(default)]
+    pub tags: Vec<String>,
+    /// Hash of the scene files.
+    pub scene_hash: String,
+    /// Hash of the reference image.
+    pub reference_hash: String,
+}
+
+/// What a runner uploads for a benchmark job.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Upload {
+    /// One entry per (scene, spp).
+    pub runs: Vec<IndexEntry>,
+    /// The metrics the values are in.
+    pub metrics: Vec<MetricInfo>,
+    /// The scenes.
+    pub scenes: Vec<SceneProvenance>,
+    /// Image digest, runner, machine and anything else that pins the run.
+    pub provenance: serde_json::Map<String, serde_json::Value>,
+}
+
+impl Upload {
+    /// Checks the upload's consistency; the message names the first problem.
+    pub fn check(&self, files: &BTreeSet<String>) -> Result<(), String> {
+        if self.runs.is_empty() {
+            return Err("results: \"runs\" is empty".into());
+        }
+        let scenes: BTreeSet<&str> = self.scenes.iter().map(|s| s.name.as_str()).collect();
+        let metrics: BTreeSet<&str> = self.metrics.iter().map(|m| m.acronym.as_str()).collect();
+        let mut seen = BTreeSet::new();
+        for (i, run) in self.runs.iter().enumerate() {
+            let at = format!("results: runs[{i}] ({} at {} spp)", run.scene, run.spp);
+            if !scenes.contains(run.scene.as_str()) {
+                return Err(format!("{at}: scene {:?} is not in \"scenes\"", run.scene));
+            }
+            if !seen.insert((run.scene.as_str(), run.spp)) {
+                return Err(format!("{at}: appears twice"));
+            }
+            for (metric, value) in &run.metrics {
+                if !metrics.contains(metric.as_str()) {
+                    return Err(format!("{at}: metric {metric:?} is not in \"metrics\""));
+                }
+                if !value.is_finite() {
+                    return Err(format!("{at}: {metric} is {value}; only finite values are stored"));
+                }
+            }
+            if !run.technique_ms.is_finite() || !run.render_ms.is_finite() {
+                return Err(format!("{at}: times must be finite"));
+            }
+            if let Some(image) = &run.image {
+                if !files.contains(image) {
+                    return Err(format!("{at}: image {image:?} was not uploaded"));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The name of an uploaded file: letters, digits, `.`, `-`, `_` and `/`
+/// between non-empty parts, no `..`.
+pub fn check_file_name(name: &str) -> Result<(), ApiError> {
+    let ok = !name.is_empty()
+        && name.len() <= 200
+        && name.split('/').all(|p| !p.is_empty() && p != "." && p != "..")
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || "._-/".contains(c));
+    if ok {
+        Ok(())
+    } else {
+        Err(ApiError::bad_request("invalid_file_name", format!("file name {name:?}: use letters, digits, . - _ and /")))
+    }
+}
+
+/// A stored result set's summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct ResultSet {
+    /// The UUID in `/results/<uuid>`.
+    pub id: String,
+    /// The technique's short name (the project's name).
+    pub technique: String,
+    /// Its project's name, if the project still exists.
+    pub project: Option<String>,
+    /// Owner, while the account exists.
+    pub user_id: Option<String>,
+    /// The technique's info.json at the commit.
+    pub info: serde_json::Value,
+    /// The commit benchmarked.
+    pub commit_sha: String,
+    /// Leaderboard season.
+    pub season: i64,
+    /// Provenance.
+    pub provenance: serde_json::Value,
+    /// Metric descriptions.
+    pub metrics: Vec<MetricInfo>,
+    /// Creation time.
+    pub created_at: i64,
+    /// Publication time, while published.
+    pub published_at: Option<i64>,
+    /// Why an administrator hid it.
+    pub hidden_reason: Option<String>,
+}
+
+/// One stored run.
+#[derive(Debug, Clone, Serialize)]
+pub struct StoredRun {
+    /// The result set.
+    pub result_id: String,
+    /// Scene.
+    pub scene: String,
+    /// Budget.
+    pub spp: i64,
+    /// Typed status.
+    pub status: String,
+    /// Why, if not ok.
+    pub message: String,
+    /// Technique time.
+    pub technique_ms: f64,
+    /// Render time.
+    pub render_ms: f64,
+    /// Samples used.
+    pub used_samples: i64,
+    /// Metric values.
+    pub metrics: BTreeMap<String, f64>,
+    /// Uploaded image file, if any.
+    pub image: Option<String>,
+}
+
+const SET_COLUMNS: &str = "r.id, r.technique, p.name AS project_name, r.user_id, r.info, r.commit_sha, r.season, \
+     r.provenance, r.metrics, r.created_at, r.published_at, r.hidden_reason";
+
+fn set_of(row: &sqlx::any::AnyRow) -> Result<ResultSet, sqlx::Error> {
+    let json = |column: &str| -> Result<serde_json::Value, sqlx::Error> {
+        let text: String = row.try_get(column)?;
+        serde_json::from_str(&text).map_err(|e| sqlx::Error::Decode(Box::new(e)))
+    };
+    Ok(ResultSet {
+        id: row.try_get("id")?,
+        technique: row.try_get("technique")?,
+        project: row.try_get("project_name")?,
+        user_id: row.try_get("user_id")?,
+        info: json("info")?,
+        commit_sha: row.try_get("commit_sha")?,
+        season: row.try_get("season")?,
+        provenance: json("provenance")?,
+        metrics: serde_json::from_value(json("metrics")?).map_err(|e| sqlx::Error::Decode(Box::new(e)))?,
+        created_at: row.try_get("created_at")?,
+        published_at: row.try_get("published_at")?,
+        hidden_reason: row.try_get("hidden_reason")?,
+    })
+}
+
+/// The result set `id` (any string: invalid UUIDs are simply not found).
+pub async fn get(pool: &AnyPool, id: &str) -> Result<Option<ResultSet>, sqlx::Error> {
+    let row = sqlx::query(&format!(
+        "SELECT {SET_COLUMNS} FROM result_sets r LEFT JOIN projects p ON p.id = r.project_id WHERE r.id = $1"
+    ))
+    .bind(id)
+    .fetch_optional(pool)
+    .await?;
+    row.as_ref().map(set_of).transpose()
+}
+
+/// Result sets of a project, newest first.
+pub async fn of_project(pool: &AnyPool, project_id: &str) -> Result<Vec<ResultSet>, sqlx::Error> {
+    let rows = sqlx::query(&format!(
+        "SELECT {SET_COLUMNS} FROM result_sets r LEFT JOIN projects p ON p.id = r.project_id \
+         WHERE r.project_id = $1 ORDER BY r.created_at DESC"
+    ))
+    .bind(project_id)
+    .fetch_all(pool)
+    .await?;
+    rows.iter().map(set_of).collect()
+}
+
+/// Published, visible result sets of a season, by technique.
+pub async fn published(pool: &AnyPool, season: i64) -> Result<Vec<ResultSet>, sqlx::Error> {
+    let rows = sqlx::query(&format!(
+        "SELECT {SET_COLUMNS} FROM result_sets r LEFT JOIN projects p ON p.id = r.project_id \
+         WHERE r.season = $1 AND r.published_at IS NOT NULL AND r.hidden_reason IS NULL ORDER BY r.technique"
+    ))
+    .bind(season)
+    .fetch_all(pool)
+    .await?;
+    rows.iter().map(set_of).collect()
+}
+
+/// The runs of some result sets.
+pub async fn runs(pool: &AnyPool, ids: &[String]) -> Result<Vec<StoredRun>, sqlx::Error> {
+    let mut out = Vec::new();
+    for id in ids {
+        let rows = sqlx::query(
+            "SELECT result_id, scene, spp, status, message, technique_ms, render_ms, used_samples, metric_values, image \
+             FROM result_runs WHERE result_id = $1 ORDER BY scene, spp",
+        )
+        .bind(id)
+        .fetch_all(pool)
+        .await?;
+        for r in rows {
+            let values: String = r.try_get("metric_values")?;
+            out.push(StoredRun {
+                result_id: r.try_get("result_id")?,
+                scene: r.try_get("scene")?,
+                spp: r.try_get("spp")?,
+                status: r.try_get("status")?,
+                message: r.try_get("message")?,
+                technique_ms: r.try_get("technique_ms")?,
+                render_ms: r.try_get("render_ms")?,
+                used_samples: r.try_get("used_samples")?,
+                metrics: serde_json::from_str(&values).unwrap_or_default(),
+                image: r.try_get("image")?,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// Scenes of some result sets: name → tags (the union over the sets).
+pub async fn scene_tags(pool: &AnyPool, ids: &[String]) -> Result<BTreeMap<String, BTreeSet<String>>, sqlx::Error> {
+    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for id in ids {
+        let rows =
+            sqlx::query("SELECT scene, tags FROM result_scenes WHERE result_id = $1").bind(id).fetch_all(pool).await?;
+        for r in rows {
+            let tags: String = r.try_get("tags")?;
+            let tags: Vec<String> = serde_json::from_str(&tags).unwrap_or_default();
+            out.entry(r.try_get("scene")?).or_default().extend(tags);
+        }
+    }
+    Ok(out)
+}
+
+/// Everything needed to store a result set, decided before the transaction.
+pub struct NewResultSet<'a> {
+    /// The job that produced it.
+    pub job_id: &'a str,
+    /// Its project.
+    pub project_id: &'a str,
+    /// Its owner.
+    pub user_id: &'a str,
+    /// Technique name.
+    pub technique: &'a str,
+    /// info.json at the commit.
+    pub info: &'a serde_json::Value,
+    /// Commit.
+    pub commit_sha: &'a str,
+    /// Season.
+    pub season: i64,
+    /// Publish at once (season re-runs).
+    pub publish: bool,
+    /// The checked upload.
+    pub upload: &'a Upload,
+}
+
+/// Inserts a result set and its runs and scenes inside `tx`; returns its UUID.
+pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSet<'_>) -> Result<String, sqlx::Error> {
+    let id = uuid::Uuid::new_v4().to_string();
+    let now = now_ms();
+    if new.publish {
+        unpublish_others(tx, new.technique, new.season).await?;
+    }
+    sqlx::query(
+        "INSERT INTO result_sets (id, job_id, project_id, user_id, technique, info, commit_sha, season, provenance, \
+         metrics, created_at, published_at) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)",
+    )
+    .bind(&id)
+    .bind(new.job_id)
+    .bind(new.project_id)
+    .bind(new.user_id)
+    .bind(new.technique)
+    .bind(new.info.to_string())
+    .bind(new.commit_sha)
+    .bind(new.season)
+    .bind(serde_json::Value::Object(new.upload.provenance.clone()).to_string())
+    .bind(serde_json::to_string(&new.upload.metrics).unwrap_or_default())
+    .bind(now)
+    .bind(if new.publish { Some(now) } else { None })
+    .execute(&mut **tx)
+    .await?;
+    for run in &new.upload.runs {
+        sqlx::query(
+            "INSERT INTO result_runs (result_id, scene, spp, status, message, technique_ms, render_ms, used_samples, \
+             metric_values, image) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
+        )
+        .bind(&id)
+        .bind(&run.scene)
+        .bind(run.spp as i64)
+        .bind(run.status.as_str())
+        .bind(&run.message)
+        .bind(run.technique_ms)
+        .bind(run.render_ms)
+        .bind(run.used_samples as i64)
+        .bind(serde_json::to_string(&run.metrics).unwrap_or_default())
+        .bind(run.image.as_deref())
+        .execute(&mut **tx)
+        .await?;
+    }
+    for scene in &new.upload.scenes {
+        sqlx::query(
+            "INSERT INTO result_scenes (result_id, scene, tags, scene_hash, reference_hash) VALUES ($1, $2, $3, $4, $5)",
+        )
+        .bind(&id)
+        .bind(&scene.name)
+        .bind(serde_json::to_string(&scene.tags).unwrap_or_default())
+        .bind(&scene.scene_hash)
+        .bind(&scene.reference_hash)
+        .execute(&mut **tx)
+        .await?;
+    }
+    Ok(id)
+}
+
+/// One published set per technique and season.
+async fn unpublish_others(
+    tx: &mut sqlx::Transaction<'_, sqlx::Any>,
+    technique: &str,
+    season: i64,
+) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE result_sets SET published_at = NULL WHERE technique = $1 AND season = $2")
+        .bind(technique)
+        .bind(season)
+        .execute(&mut **tx)
+        .await?;
+    Ok(())
+}
+
+/// The result set `id` if `user_id` owns it: 404 for an invalid or unknown
+/// UUID or another user's set (which it does not reveal).
+pub async fn owned(pool: &AnyPool, id: &str, user_id: &str) -> Result<ResultSet, ApiError> {
+    let not_found = || ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {id:?} of yours"));
+    if uuid::Uuid::parse_str(id).is_err() {
+        return Err(ApiError::bad_request("invalid_uuid", format!("{id:?} is not a result UUID")));
+    }
+    match get(pool, id).await? {
+        Some(set) if set.user_id.as_deref() == Some(user_id) => Ok(set),
+        _ => Err(not_found()),
+    }
+}
+
+/// Puts the set on its season's leaderboard, replacing the technique's
+/// previously published set there.
+pub async fn publish(pool: &AnyPool, set: &ResultSet) -> Result<(), ApiError> {
+    if set.hidden_reason.is_some() {
+        return Err(ApiError::forbidden("hidden", "an administrator hid this result set; it cannot be published"));
+    }
+    let mut tx = pool.begin().await?;
+    sqlx::query("UPDATE result_sets SET published_at = NULL WHERE technique = $1 AND season = $2")
+        .bind(&set.technique)
+        .bind(set.season)
+        .execute(&mut *tx)
+        .await?;
+    sqlx::query("UPDATE result_sets SET published_at = $1 WHERE id = $2")
+        .bind(now_ms())
+        .bind(&set.id)
+        .execute(&mut *tx)
+        .await?;
+    tx.commit().await?;
+    Ok(())
+}
+
+/// Takes the set off the leaderboard.
+pub async fn unpublish(pool: &AnyPool, id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE result_sets SET published_at = NULL WHERE id = $1").bind(id).execute(pool).await?;
+    Ok(())
+}
+
+/// Deletes the set (rows and files).
+pub async fn discard(pool: &AnyPool, data_dir: &std::path::Path, id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("DELETE FROM result_sets WHERE id = $1").bind(id).execute(pool).await?;
+    let _ = tokio::fs::remove_dir_all(files_dir(data_dir, id)).await;
+    Ok(())
+}
+
+/// Hides (with a reason) or shows again a set (administration).
+pub async fn set_hidden(pool: &AnyPool, id: &str, reason: Option<&str>) -> Result<bool, sqlx::Error> {
+    let done = sqlx::query("UPDATE result_sets SET hidden_reason = $1 WHERE id = $2")
+        .bind(reason)
+        .bind(id)
+        .execute(pool)
+        .await?;
+    Ok(done.rows_affected() > 0)
+}
+
+/// Deletes a user's unpublished sets (with their account); published ones stay.
+pub async fn discard_unpublished_of(
+    pool: &AnyPool,
+    data_dir: &std::path::Path,
+    user_id: &str,
+) -> Result<(), sqlx::Error> {
+    let rows = sqlx::query("SELECT id FROM result_sets WHERE user_id = $1 AND published_at IS NULL")
+        .bind(user_id)
+        .fetch_all(pool)
+        .await?;
+    for row in rows {
+        discard(pool, data_dir, &row.try_get::<String, _>("id")?).await?;
+    }
+    Ok(())
+}
+
+/// Where a stored set's files live.
+pub fn files_dir(data_dir: &std::path::Path, id: &str) -> std::path::PathBuf {
+    data_dir.join("results").join(id)
+}
+
+/// Where a job's uploads wait until the job succeeds.
+pub fn staging_dir(data_dir: &std::path::Path, job_id: &str) -> std::path::PathBuf {
+    data_dir.join("uploads").join(job_id)
+}
+
+/// The current (latest) season.
+pub async fn current_season(pool: &AnyPool) -> Result<i64, sqlx::Error> {
+    sqlx::query("SELECT MAX(number) AS n FROM seasons").fetch_one(pool).await?.try_get("n")
+}
+
+/// Every season: (number, note, start).
+pub async fn seasons(pool: &AnyPool) -> Result<Vec<(i64, String, i64)>, sqlx::Error> {
+    let rows = sqlx::query("SELECT number, note, started_at FROM seasons ORDER BY number").fetch_all(pool).await?;
+    rows.iter().map(|r| Ok((r.try_get("number")?, r.try_get("note")?, r.try_get("started_at")?))).collect()
+}

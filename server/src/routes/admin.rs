@@ -1,0 +1,133 @@
+//! Administration (API): jobs, runners, the registration token, seasons.
+
+use super::Admin;
+use crate::error::ApiError;
+use crate::pipelines::{Request, Source};
+use crate::AppState;
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use axum::Json;
+use serde::Deserialize;
+use serde_json::json;
+use sqlx::Row;
+
+/// `GET /api/v1/admin/jobs`: the latest jobs of everyone.
+pub async fn jobs(State(state): State<AppState>, Admin(_): Admin) -> Result<Json<Vec<crate::jobs::Job>>, ApiError> {
+    Ok(Json(crate::jobs::all(&state.pool, 500).await?))
+}
+
+/// `POST /api/v1/admin/jobs/{id}/requeue`.
+pub async fn requeue(
+    State(state): State<AppState>,
+    Admin(admin): Admin,
+    Path(id): Path<String>,
+) -> Result<Json<crate::jobs::Job>, ApiError> {
+    crate::jobs::requeue(&state.pool, &id, &admin.email).await?;
+    state.job_queued.notify_waiters();
+    crate::jobs::get(&state.pool, &id)
+        .await?
+        .map(Json)
+        .ok_or_else(|| ApiError::new(StatusCode::NOT_FOUND, "not_found", "no such job"))
+}
+
+/// `GET /api/v1/admin/runners`: runners and their health.
+pub async fn runners(State(state): State<AppState>, Admin(_): Admin) -> Result<Json<serde_json::Value>, ApiError> {
+    let now = crate::now_ms();
+    let lease_ms = state.config.lease_seconds as i64 * 1000;
+    let list: Vec<_> = crate::runners::all(&state.pool)
+        .await?
+        .into_iter()
+        .map(|r| {
+            // A runner that has not been heard of for two leases is presumed gone.
+            let healthy = now - r.last_seen_at <= 2 * lease_ms.max(state.config.long_poll_seconds as i64 * 1000);
+            json!({ "runner": r, "healthy": healthy, "seconds_since_seen": (now - r.last_seen_at) / 1000 })
+        })
+        .collect();
+    Ok(Json(json!(list)))
+}
+
+/// `DELETE /api/v1/admin/runners/{id}`: forgets a runner; its jobs are queued again.
+pub async fn remove_runner(
+    State(state): State<AppState>,
+    Admin(_): Admin,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    if crate::runners::remove(&state.pool, &id).await? {
+        crate::jobs::expire_leases(&state.pool).await?;
+        state.job_queued.notify_waiters();
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no runner {id}")))
+    }
+}
+
+/// `POST /api/v1/admin/runner-registration-token`: a new token (the old one stops working).
+pub async fn rotate_registration_token(
+    State(state): State<AppState>,
+    Admin(_): Admin,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let token = crate::runners::rotate_registration_token(&state.pool).await?;
+    Ok(Json(json!({ "registration_token": token })))
+}
+
+/// A new season.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewSeason {
+    note: String,
+}
+
+/// `POST /api/v1/admin/seasons`: the scene pool changed. Starts a season
+/// (the old boards stay readable) and queues a benchmark of every technique
+/// published in the previous one, at the same commit, published on success.
+pub async fn new_season(
+    State(state): State<AppState>,
+    Admin(_): Admin,
+    Json(body): Json<NewSeason>,
+) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
+    let note = body.note.trim();
+    if note.is_empty() {
+        return Err(ApiError::bad_request("missing_note", "say what changed in the scene pool"));
+    }
+    let previous = crate::results::current_season(&state.pool).await?;
+    let published = crate::results::published(&state.pool, previous).await?;
+    sqlx::query("INSERT INTO seasons (number, note, started_at) VALUES ($1, $2, $3)")
+        .bind(previous + 1)
+        .bind(note)
+        .bind(crate::now_ms())
+        .execute(&state.pool)
+        .await?;
+    let mut queued = Vec::new();
+    let mut skipped = Vec::new();
+    for set in published {
+        let row = sqlx::query("SELECT p.id FROM projects p WHERE p.name = $1")
+            .bind(&set.technique)
+            .fetch_optional(&state.pool)
+            .await?;
+        let project = match row {
+            Some(r) => crate::projects::by_id(&state.pool, &r.try_get::<String, _>("id")?).await?,
+            None => None,
+        };
+        let owner = match &project {
+            Some(p) => crate::accounts::user_by_id(&state.pool, &p.owner_id).await?,
+            None => None,
+        };
+        match (project, owner) {
+            (Some(project), Some(owner)) => {
+                let started = crate::pipelines::start(
+                    &state,
+                    &project,
+                    &owner,
+                    &set.commit_sha,
+                    "season",
+                    Request::Run,
+                    Source::Season,
+                )
+                .await?;
+                queued.push(json!({ "technique": set.technique, "job": started.job.id }));
+            }
+            _ => skipped.push(json!({ "technique": set.technique, "why": "its project or owner was deleted" })),
+        }
+    }
+    Ok((StatusCode::CREATED, Json(json!({ "season": previous + 1, "queued": queued, "skipped": skipped }))))
+}

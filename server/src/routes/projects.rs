@@ -1,0 +1,364 @@
+//! Projects, pipelines and jobs as their users see them (API), and the git
+//! smart-HTTP endpoint.
+
+use super::{Caller, MaybeUser};
+use crate::accounts::User;
+use crate::error::ApiError;
+use crate::jobs::Job;
+use crate::pipelines::{Request, Source};
+use crate::projects::{self, Project, ProjectName, Visibility};
+use crate::AppState;
+use axum::body::Body;
+use axum::extract::{Path, Query, State};
+use axum::http::{header, HeaderMap, Method, StatusCode, Uri};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use base64::Engine;
+use serde::Deserialize;
+use serde_json::json;
+use std::collections::BTreeMap;
+
+/// A new project.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewProject {
+    name: String,
+    #[serde(default = "private")]
+    visibility: String,
+}
+
+fn private() -> String {
+    "private".into()
+}
+
+/// How a project is shown: with its clone URL.
+fn project_json(state: &AppState, project: &Project) -> serde_json::Value {
+    json!({
+        "id": project.id,
+        "name": project.name,
+        "visibility": project.visibility,
+        "owner_id": project.owner_id,
+        "created_at": project.created_at,
+        "clone_url": format!("{}/git/{}.git", state.public_url, project.name),
+    })
+}
+
+/// `POST /api/v1/projects`: creates a project and its empty repository.
+pub async fn create(
+    State(state): State<AppState>,
+    caller: Caller,
+    Json(body): Json<NewProject>,
+) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
+    let name = ProjectName::parse(&body.name)?;
+    let visibility = Visibility::parse(&body.visibility)?;
+    let project = projects::insert(&state.pool, &caller.user, &name, visibility).await?;
+    if let Err(e) = state.git.create(&project.id).await {
+        // Nothing half-made: no row without its repository.
+        sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
+        state.git.delete(&project.id).await;
+        return Err(ApiError::internal(e));
+    }
+    Ok((StatusCode::CREATED, Json(project_json(&state, &project))))
+}
+
+/// `GET /api/v1/projects`: the projects the caller can see.
+pub async fn list(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let list = projects::visible(&state.pool, user.as_ref()).await?;
+    Ok(Json(json!(list.iter().map(|p| project_json(&state, p)).collect::<Vec<_>>())))
+}
+
+/// `GET /api/v1/projects/{name}`: a project, its jobs and result sets.
+pub async fn show(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path(name): Path<String>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let project = projects::readable(&state.pool, &name, user.as_ref()).await?;
+    let jobs = crate::jobs::of_project(&state.pool, &project.id, 100).await?;
+    let owner = user.as_ref().is_some_and(|u| u.id == project.owner_id || u.is_admin);
+    // Others see only published result sets.
+    let results: Vec<_> = crate::results::of_project(&state.pool, &project.id)
+        .await?
+        .into_iter()
+        .filter(|r| owner || (r.published_at.is_some() && r.hidden_reason.is_none()))
+        .collect();
+    let mut body = project_json(&state, &project);
+    body["jobs"] = json!(jobs);
+    body["results"] = json!(results);
+    Ok(Json(body))
+}
+
+/// `DELETE /api/v1/projects/{name}`: deletes the project, its repository,
+/// jobs and unpublished results (published ones stay on the leaderboard).
+pub async fn delete(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(name): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    let project = projects::writable(&state.pool, &name, &caller.user).await?;
+    for set in crate::results::of_project(&state.pool, &project.id).await? {
+        if set.published_at.is_none() {
+            crate::results::discard(&state.pool, &state.config.data_dir, &set.id).await?;
+        }
+    }
+    sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
+    state.git.delete(&project.id).await;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// A pipeline request.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NewPipeline {
+    /// Branch, tag or commit; the default branch `main` if absent.
+    #[serde(rename = "ref", default)]
+    git_ref: Option<String>,
+    #[serde(default)]
+    variables: BTreeMap<String, String>,
+}
+
+/// `POST /api/v1/projects/{name}/pipelines`: runs a pipeline (e.g. with
+/// `FBKSD_RUN`) at a ref.
+pub async fn run_pipeline(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(name): Path<String>,
+    Json(body): Json<NewPipeline>,
+) -> Result<(StatusCode, Json<crate::pipelines::Started>), ApiError> {
+    let project = projects::writable(&state.pool, &name, &caller.user).await?;
+    let request = Request::parse(body.variables.iter().map(|(k, v)| (k.as_str(), v.as_str())))?;
+    let git_ref = body.git_ref.unwrap_or_else(|| "main".into());
+    let commit = state.git.resolve(&project.id, &git_ref).await.ok_or_else(|| {
+        ApiError::bad_request("unknown_ref", format!("{git_ref:?} names no commit of {name}: push first"))
+    })?;
+    let started =
+        crate::pipelines::start(&state, &project, &caller.user, &commit, &git_ref, request, Source::Api).await?;
+    Ok((StatusCode::CREATED, Json(started)))
+}
+
+/// The job `id` if `user` can read its project; 404 otherwise (and for an invalid id).
+pub async fn readable_job(state: &AppState, id: &str, user: Option<&User>) -> Result<(Job, Project), ApiError> {
+    let not_found = || ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no job {id:?} that you can see"));
+    let job = crate::jobs::get(&state.pool, id).await?.ok_or_else(not_found)?;
+    let project = projects::by_id(&state.pool, &job.project_id).await?.ok_or_else(not_found)?;
+    if !project.readable_by(user) {
+        return Err(not_found());
+    }
+    Ok((job, project))
+}
+
+/// `GET /api/v1/jobs/{id}`.
+pub async fn job(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path(id): Path<String>,
+) -> Result<Json<Job>, ApiError> {
+    Ok(Json(readable_job(&state, &id, user.as_ref()).await?.0))
+}
+
+/// Where to continue a log.
+#[derive(Deserialize)]
+pub struct After {
+    #[serde(default)]
+    after: i64,
+}
+
+/// `GET /api/v1/jobs/{id}/log?after=N`: log chunks after sequence number N.
+pub async fn log(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path(id): Path<String>,
+    Query(after): Query<After>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let (job, _) = readable_job(&state, &id, user.as_ref()).await?;
+    let chunks = crate::jobs::log_since(&state.pool, &id, after.after).await?;
+    Ok(Json(json!({
+        "state": job.state,
+        "chunks": chunks.iter().map(|(seq, text)| json!({ "seq": seq, "text": text })).collect::<Vec<_>>(),
+    })))
+}
+
+/// `GET /api/v1/jobs/{id}/log/stream`: the log as server-sent events
+/// (`log` events with the text, then one `end` event with the final
+/// state). It polls the database, so it works behind several server
+/// instances.
+pub async fn log_stream(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    readable_job(&state, &id, user.as_ref()).await?;
+    let stream = async_stream(state, id);
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
+}
+
+fn async_stream(
+    state: AppState,
+    id: String,
+) -> impl futures_util::Stream<Item = Result<Event, std::convert::Infallible>> {
+    futures_util::stream::unfold((state, id, 0i64, false), |(state, id, after, done)| async move {
+        if done {
+            return None;
+        }
+        loop {
+            let chunks = crate::jobs::log_since(&state.pool, &id, after).await.unwrap_or_default();
+            if let Some((seq, _)) = chunks.last() {
+                let text: String = chunks.iter().map(|(_, t)| t.as_str()).collect();
+                let event = Event::default().event("log").id(seq.to_string()).data(text);
+                return Some((Ok(event), (state, id, *seq, false)));
+            }
+            let job_state = crate::jobs::get(&state.pool, &id).await.ok().flatten().map(|j| j.state);
+            match job_state.as_deref() {
+                Some("queued") | Some("running") => tokio::time::sleep(std::time::Duration::from_millis(300)).await,
+                other => {
+                    let event = Event::default().event("end").data(other.unwrap_or("gone"));
+                    return Some((Ok(event), (state, id, after, true)));
+                }
+            }
+        }
+    })
+}
+
+/// `POST /api/v1/jobs/{id}/cancel`: the owner or an administrator cancels a job.
+pub async fn cancel(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Json<Job>, ApiError> {
+    let (job, project) = readable_job(&state, &id, Some(&caller.user)).await?;
+    if !(project.writable_by(&caller.user) || caller.user.is_admin) {
+        return Err(ApiError::forbidden(
+            "not_owner",
+            "only the project's owner or an administrator can cancel its jobs",
+        ));
+    }
+    crate::jobs::cancel(&state.pool, &job.id, &caller.user.email).await?;
+    Ok(Json(crate::jobs::get(&state.pool, &id).await?.ok_or_else(|| ApiError::internal("job vanished"))?))
+}
+
+/// Who a git request authenticates as: HTTP Basic with a personal access
+/// token (or a job token, for the runner's clone) as the password.
+enum GitCaller {
+    Anonymous,
+    User(User),
+    Job(String),
+}
+
+async fn git_caller(state: &AppState, headers: &HeaderMap) -> Result<GitCaller, ApiError> {
+    let Some(value) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()) else {
+        return Ok(GitCaller::Anonymous);
+    };
+    let secret = if let Some(basic) = value.strip_prefix("Basic ") {
+        let decoded = base64::engine::general_purpose::STANDARD.decode(basic.trim()).unwrap_or_default();
+        let text = String::from_utf8_lossy(&decoded).into_owned();
+        text.split_once(':').map(|(_, p)| p.to_string()).unwrap_or_default()
+    } else if let Some(bearer) = value.strip_prefix("Bearer ") {
+        bearer.trim().to_string()
+    } else {
+        String::new()
+    };
+    if secret.starts_with(crate::jobs::JOB_TOKEN_PREFIX) {
+        if let Some((job_id, job_state, _)) = crate::jobs::token_job(&state.pool, &secret).await? {
+            if job_state == "running" {
+                return Ok(GitCaller::Job(job_id));
+            }
+        }
+    } else if let Some(user) = crate::accounts::token_user(&state.pool, &secret).await? {
+        return Ok(GitCaller::User(user));
+    }
+    Err(ApiError::unauthorized("wrong credentials"))
+}
+
+fn ask_credentials(message: &str) -> Response {
+    (
+        StatusCode::UNAUTHORIZED,
+        [(header::WWW_AUTHENTICATE, "Basic realm=\"FBKSD\", charset=\"UTF-8\"")],
+        format!("{message}\n"),
+    )
+        .into_response()
+}
+
+/// `/git/{name}.git/…`: smart HTTP through `git http-backend`. Reading
+/// follows the project's visibility; pushing needs the owner's personal
+/// access token; a running job's token may clone its own project.
+pub async fn git(
+    State(state): State<AppState>,
+    Path((repo, rest)): Path<(String, String)>,
+    method: Method,
+    uri: Uri,
+    headers: HeaderMap,
+    body: Body,
+) -> Response {
+    let Some(name) = repo.strip_suffix(".git") else {
+        return (StatusCode::NOT_FOUND, "repositories are at /git/<name>.git\n").into_response();
+    };
+    let query = uri.query().unwrap_or("");
+    let push = rest == "git-receive-pack" || query.contains("service=git-receive-pack");
+    let caller = match git_caller(&state, &headers).await {
+        Ok(c) => c,
+        Err(e) => return ask_credentials(&format!("{}: use a personal access token as the password", e.message)),
+    };
+    let project = match projects::by_name(&state.pool, name).await {
+        Ok(Some(p)) => p,
+        Ok(None) => return ask_or_hide(&caller, name),
+        Err(e) => return ApiError::from(e).into_response(),
+    };
+    let (allowed, user) = match &caller {
+        GitCaller::Anonymous => (!push && project.readable_by(None), None),
+        GitCaller::User(u) => (if push { project.writable_by(u) } else { project.readable_by(Some(u)) }, Some(u)),
+        GitCaller::Job(job_id) => {
+            let job_project = crate::jobs::get(&state.pool, job_id).await.ok().flatten().map(|j| j.project_id);
+            (!push && job_project.as_deref() == Some(project.id.as_str()), None)
+        }
+    };
+    if !allowed {
+        return match (&caller, project.readable_by(user)) {
+            (GitCaller::Anonymous, _) => {
+                ask_credentials("log in: user name anything, password a personal access token")
+            }
+            (_, true) => (StatusCode::FORBIDDEN, format!("only the owner of {name} can push to it\n")).into_response(),
+            (_, false) => ask_or_hide(&caller, name),
+        };
+    }
+    let remote_user = user.map(|u| u.email.clone()).unwrap_or_else(|| "anonymous".into());
+    let served = state
+        .git
+        .serve(
+            &project.id,
+            crate::git::GitRequest { method: &method, rest: &rest, query, headers: &headers },
+            body,
+            &remote_user,
+        )
+        .await;
+    if let (Some(record), Some(user)) = (served.push, user) {
+        handle_push(&state, &project, user, record).await;
+    }
+    served.response
+}
+
+fn ask_or_hide(caller: &GitCaller, name: &str) -> Response {
+    match caller {
+        GitCaller::Anonymous => ask_credentials("log in: user name anything, password a personal access token"),
+        _ => (StatusCode::NOT_FOUND, format!("no repository {name}.git that you can see\n")).into_response(),
+    }
+}
+
+/// Starts the pipelines of a push that landed: one per branch moved.
+async fn handle_push(state: &AppState, project: &Project, user: &User, record: crate::git::PushRecord) {
+    // The pre-receive hook has refused unknown options already; this parse cannot fail on its output.
+    let request = Request::from_push_options(&record.options).unwrap_or(Request::Build);
+    for update in
+        record.updates.iter().filter(|u| u.name.starts_with("refs/heads/") && !u.new.bytes().all(|b| b == b'0'))
+    {
+        let branch = update.name.trim_start_matches("refs/heads/");
+        if let Err(e) =
+            crate::pipelines::start(state, project, user, &update.new, branch, request.clone(), Source::Push).await
+        {
+            tracing::error!("pipeline for push to {}: {}", project.name, e.message);
+        }
+    }
+}

@@ -1,0 +1,142 @@
+//! Result sets and the leaderboard (API), and result files.
+
+use super::{Admin, Caller, MaybeUser};
+use crate::accounts::User;
+use crate::error::ApiError;
+use crate::leaderboard::{self, BoardQuery};
+use crate::results::{self, ResultSet};
+use crate::AppState;
+use axum::extract::{Path, Query, State};
+use axum::http::{header, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde::Deserialize;
+use serde_json::json;
+
+/// The set `id` if `user` may see it: its owner and administrators always;
+/// everyone once it is published and not hidden. Otherwise 404, so
+/// private sets do not reveal that they exist.
+pub async fn visible_set(state: &AppState, id: &str, user: Option<&User>) -> Result<ResultSet, ApiError> {
+    if uuid::Uuid::parse_str(id).is_err() {
+        return Err(ApiError::bad_request("invalid_uuid", format!("{id:?} is not a result UUID")));
+    }
+    let not_found =
+        || ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {id} that you can see"));
+    let set = results::get(&state.pool, id).await?.ok_or_else(not_found)?;
+    let owner = user.is_some_and(|u| set.user_id.as_deref() == Some(u.id.as_str()) || u.is_admin);
+    let public = set.published_at.is_some() && set.hidden_reason.is_none();
+    if owner || public {
+        Ok(set)
+    } else {
+        Err(not_found())
+    }
+}
+
+/// `GET /api/v1/results/{id}`: a result set with its runs and the board it sits on.
+pub async fn show(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path(id): Path<String>,
+    Query(query): Query<BoardQuery>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let set = visible_set(&state, &id, user.as_ref()).await?;
+    let runs = results::runs(&state.pool, std::slice::from_ref(&set.id)).await?;
+    let board = leaderboard::build(&state.pool, &query, Some(&set)).await?;
+    Ok(Json(json!({ "result": set, "runs": runs, "board": board })))
+}
+
+/// `GET /api/v1/leaderboard?season=&sort=&tag=`.
+pub async fn board(
+    State(state): State<AppState>,
+    Query(query): Query<BoardQuery>,
+) -> Result<Json<leaderboard::Board>, ApiError> {
+    Ok(Json(leaderboard::build(&state.pool, &query, None).await?))
+}
+
+/// `POST /api/v1/results/{id}/publish`: the owner publishes.
+pub async fn publish(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let set = results::owned(&state.pool, &id, &caller.user.id).await?;
+    results::publish(&state.pool, &set).await?;
+    Ok(Json(json!({ "published": true, "leaderboard": format!("{}/results/", state.public_url) })))
+}
+
+/// `POST /api/v1/results/{id}/unpublish`: the owner takes it off the leaderboard.
+pub async fn unpublish(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let set = results::owned(&state.pool, &id, &caller.user.id).await?;
+    results::unpublish(&state.pool, &set.id).await?;
+    Ok(Json(json!({ "published": false })))
+}
+
+/// `DELETE /api/v1/results/{id}`: the owner discards it.
+pub async fn discard(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    let set = results::owned(&state.pool, &id, &caller.user.id).await?;
+    results::discard(&state.pool, &state.config.data_dir, &set.id).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// A reason to hide a result set.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HideRequest {
+    reason: String,
+}
+
+/// `POST /api/v1/admin/results/{id}/hide`: an administrator hides a set that breaks the rules.
+pub async fn hide(
+    State(state): State<AppState>,
+    Admin(_): Admin,
+    Path(id): Path<String>,
+    Json(body): Json<HideRequest>,
+) -> Result<StatusCode, ApiError> {
+    let reason = body.reason.trim();
+    if reason.is_empty() {
+        return Err(ApiError::bad_request("missing_reason", "say why the result set is hidden: its owner sees it"));
+    }
+    if results::set_hidden(&state.pool, &id, Some(reason)).await? {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {id}")))
+    }
+}
+
+/// `DELETE /api/v1/admin/results/{id}/hide`: shows it again.
+pub async fn unhide(
+    State(state): State<AppState>,
+    Admin(_): Admin,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    if results::set_hidden(&state.pool, &id, None).await? {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {id}")))
+    }
+}
+
+/// `GET /results/{id}/files/{*name}`: a file of a set the caller may see.
+pub async fn file(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path((id, name)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let set = visible_set(&state, &id, user.as_ref()).await?;
+    results::check_file_name(&name)?;
+    let path = results::files_dir(&state.config.data_dir, &set.id).join(&name);
+    let bytes = tokio::fs::read(&path)
+        .await
+        .map_err(|_| ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no file {name} in result set {id}")))?;
+    let kind = if name.ends_with(".png") { "image/png" } else { "application/octet-stream" };
+    Ok(([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], bytes)
+        .into_response())
+}

@@ -1,0 +1,206 @@
+//! The runner API: registration, claiming jobs (long poll), and reporting
+//! on one job with its job token (heartbeat, log, results, files, end).
+//!
+//! ```text
+//! POST /api/v1/runners              {registration_token, name, machine} → {id, token}
+//! POST /api/v1/runners/jobs         runner token; {wait_seconds} → 200 job | 204 none
+//! POST /api/v1/jobs/{id}/heartbeat  job token → {lease_seconds}
+//! POST /api/v1/jobs/{id}/log        job token; text body (appended)
+//! PUT  /api/v1/jobs/{id}/results    job token; results JSON (see `results`)
+//! PUT  /api/v1/jobs/{id}/files/{*}  job token; a file of the result set (PNG)
+//! POST /api/v1/jobs/{id}/finish     job token; {state, reason, message}
+//! ```
+//! A job token that is no longer valid (job cancelled, requeued after a
+//! lost lease, finished) gets 410: the runner must stop the job.
+
+use super::{JobCaller, RunnerCaller};
+use crate::error::ApiError;
+use crate::AppState;
+use axum::body::Bytes;
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde::Deserialize;
+use serde_json::json;
+use std::time::{Duration, Instant};
+
+/// A runner's registration.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Registration {
+    registration_token: String,
+    name: String,
+    #[serde(default)]
+    machine: serde_json::Value,
+}
+
+/// `POST /api/v1/runners`.
+pub async fn register(
+    State(state): State<AppState>,
+    Json(body): Json<Registration>,
+) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
+    let (id, token) =
+        crate::runners::register(&state.pool, &body.registration_token, &body.name, &body.machine).await?;
+    Ok((StatusCode::CREATED, Json(json!({ "id": id, "token": token }))))
+}
+
+/// How long a claim may wait.
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ClaimRequest {
+    #[serde(default)]
+    wait_seconds: u64,
+}
+
+/// `POST /api/v1/runners/jobs`: the next job, waiting up to `wait_seconds`
+/// (capped by the server) for one; 204 when none came.
+pub async fn claim(
+    State(state): State<AppState>,
+    RunnerCaller(runner_id): RunnerCaller,
+    body: Option<Json<ClaimRequest>>,
+) -> Result<Response, ApiError> {
+    let wait = body.map(|b| b.0.wait_seconds).unwrap_or(0).min(state.config.long_poll_seconds);
+    let deadline = Instant::now() + Duration::from_secs(wait);
+    let lease_ms = state.config.lease_seconds as i64 * 1000;
+    loop {
+        crate::jobs::expire_leases(&state.pool).await?;
+        let notified = state.job_queued.notified();
+        if let Some(claimed) = crate::jobs::claim(&state.pool, state.postgres, &runner_id, lease_ms).await? {
+            let job = &claimed.job;
+            return Ok(Json(json!({
+                "job": job,
+                "token": claimed.token,
+                "repository": format!("{}/git/{}.git", state.public_url, job.project),
+                "commit": job.commit_sha,
+                "lease_seconds": state.config.lease_seconds,
+                "results_url": state.public_url,
+            }))
+            .into_response());
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            return Ok(StatusCode::NO_CONTENT.into_response());
+        }
+        // Woken by a job queued here, or polling for jobs queued on other instances.
+        let _ = tokio::time::timeout((deadline - now).min(Duration::from_secs(1)), notified).await;
+    }
+}
+
+/// `POST /api/v1/jobs/{id}/heartbeat`: extends the lease.
+pub async fn heartbeat(State(state): State<AppState>, job: JobCaller) -> Result<Json<serde_json::Value>, ApiError> {
+    crate::jobs::heartbeat(&state.pool, &job.job_id, state.config.lease_seconds as i64 * 1000).await?;
+    Ok(Json(json!({ "lease_seconds": state.config.lease_seconds })))
+}
+
+/// `POST /api/v1/jobs/{id}/log`: appends text to the job's log.
+pub async fn append_log(State(state): State<AppState>, job: JobCaller, body: Bytes) -> Result<StatusCode, ApiError> {
+    let text = String::from_utf8_lossy(&body);
+    let max = state.config.max_log_bytes as i64;
+    if crate::jobs::append_log(&state.pool, &job.job_id, job.attempt, &text, max).await? {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "log_too_large",
+            format!("the job's log would pass {} bytes; the rest is dropped", state.config.max_log_bytes),
+        ))
+    }
+}
+
+/// Reads a request body of at most the job upload limit.
+async fn read_upload(state: &AppState, body: axum::body::Body) -> Result<Bytes, ApiError> {
+    axum::body::to_bytes(body, state.config.max_upload_bytes as usize).await.map_err(|_| {
+        ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "upload_too_large",
+            format!("an upload is limited to {} bytes", state.config.max_upload_bytes),
+        )
+    })
+}
+
+/// Counts `bytes` against the job's upload budget, or refuses them.
+async fn charge_upload(state: &AppState, job_id: &str, bytes: usize) -> Result<(), ApiError> {
+    let done =
+        sqlx::query("UPDATE jobs SET upload_bytes = upload_bytes + $1 WHERE id = $2 AND upload_bytes + $1 <= $3")
+            .bind(bytes as i64)
+            .bind(job_id)
+            .bind(state.config.max_upload_bytes as i64)
+            .execute(&state.pool)
+            .await?;
+    if done.rows_affected() == 0 {
+        return Err(ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "upload_too_large",
+            format!("the job's uploads would pass {} bytes", state.config.max_upload_bytes),
+        ));
+    }
+    Ok(())
+}
+
+/// `PUT /api/v1/jobs/{id}/files/{*name}`: one file of the result set.
+pub async fn put_file(
+    State(state): State<AppState>,
+    job: JobCaller,
+    Path((_, name)): Path<(String, String)>,
+    body: axum::body::Body,
+) -> Result<StatusCode, ApiError> {
+    crate::results::check_file_name(&name)?;
+    let body = read_upload(&state, body).await?;
+    charge_upload(&state, &job.job_id, body.len()).await?;
+    let path = crate::results::staging_dir(&state.config.data_dir, &job.job_id).join(&name);
+    if let Some(parent) = path.parent() {
+        tokio::fs::create_dir_all(parent).await.map_err(ApiError::internal)?;
+    }
+    tokio::fs::write(&path, &body).await.map_err(ApiError::internal)?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// `PUT /api/v1/jobs/{id}/results`: the results (checked now; stored
+/// when the job reports success).
+pub async fn put_results(
+    State(state): State<AppState>,
+    job: JobCaller,
+    body: axum::body::Body,
+) -> Result<StatusCode, ApiError> {
+    let body = read_upload(&state, body).await?;
+    charge_upload(&state, &job.job_id, body.len()).await?;
+    let upload: crate::results::Upload =
+        serde_json::from_slice(&body).map_err(|e| ApiError::bad_request("invalid_output", format!("results: {e}")))?;
+    let staging = crate::results::staging_dir(&state.config.data_dir, &job.job_id);
+    upload.check(&uploaded_files(&staging)).map_err(|e| ApiError::bad_request("invalid_output", e))?;
+    sqlx::query("UPDATE jobs SET staged_results = $1 WHERE id = $2")
+        .bind(String::from_utf8_lossy(&body).into_owned())
+        .bind(&job.job_id)
+        .execute(&state.pool)
+        .await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Relative paths of the files under `dir`.
+fn uploaded_files(dir: &std::path::Path) -> std::collections::BTreeSet<String> {
+    fn walk(root: &std::path::Path, dir: &std::path::Path, out: &mut std::collections::BTreeSet<String>) {
+        for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                walk(root, &path, out);
+            } else if let Ok(rel) = path.strip_prefix(root) {
+                out.insert(rel.to_string_lossy().into_owned());
+            }
+        }
+    }
+    let mut out = std::collections::BTreeSet::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// `POST /api/v1/jobs/{id}/finish`: the job ended.
+pub async fn finish(
+    State(state): State<AppState>,
+    job: JobCaller,
+    Json(outcome): Json<crate::pipelines::Outcome>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let result = crate::pipelines::finish(&state, &job.job_id, job.attempt, outcome).await?;
+    let url = result.as_ref().map(|id| format!("{}/results/{id}", state.public_url));
+    Ok(Json(json!({ "result_id": result, "results_url": url })))
+}

@@ -1,0 +1,256 @@
+//! The service's main path through the real HTTP API, real git and a fake
+//! runner, on SQLite and on PostgreSQL: register → verify → create project →
+//! `git push` → build job → FBKSD_RUN → results uploaded → private page →
+//! publish → leaderboard; and who may do what on the way.
+
+mod common;
+
+use common::{push, spawn, spawn_with, technique_repository, Db, FakeRunner};
+use reqwest::Method;
+use serde_json::{json, Value};
+
+async fn json_of(response: reqwest::Response) -> (u16, Value) {
+    let status = response.status().as_u16();
+    (status, response.json().await.unwrap_or_default())
+}
+
+/// Creates a project; its JSON.
+async fn create_project(server: &common::TestServer, user: &common::TestUser, name: &str, visibility: &str) -> Value {
+    let (status, body) = json_of(
+        user.api(Method::POST, format!("{}/api/v1/projects", server.url))
+            .json(&json!({ "name": name, "visibility": visibility }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, 201, "{body}");
+    body
+}
+
+async fn project_jobs(server: &common::TestServer, user: &common::TestUser, name: &str) -> Vec<Value> {
+    let (status, body) =
+        json_of(user.api(Method::GET, format!("{}/api/v1/projects/{name}", server.url)).send().await.unwrap()).await;
+    assert_eq!(status, 200, "{body}");
+    body["jobs"].as_array().unwrap().clone()
+}
+
+async fn log_text(server: &common::TestServer, user: &common::TestUser, job: &str) -> String {
+    let (status, body) =
+        json_of(user.api(Method::GET, format!("{}/api/v1/jobs/{job}/log", server.url)).send().await.unwrap()).await;
+    assert_eq!(status, 200, "{body}");
+    body["chunks"].as_array().unwrap().iter().map(|c| c["text"].as_str().unwrap()).collect()
+}
+
+on_both_databases!(push_build_run_publish_and_the_leaderboard, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    let project = create_project(&server, &ada, "box-filter-cpp", "private").await;
+    assert!(project["clone_url"].as_str().unwrap().ends_with("/git/box-filter-cpp.git"));
+
+    // A push with real git starts a build job.
+    let repo = technique_repository("box-filter-cpp");
+    let (pushed, output) = push(repo.path(), &server.clone_url("box-filter-cpp", &ada.token), &[]);
+    assert!(pushed, "{output}");
+    let jobs = project_jobs(&server, &ada, "box-filter-cpp").await;
+    assert_eq!(jobs.len(), 1);
+    assert_eq!((jobs[0]["kind"].as_str(), jobs[0]["state"].as_str()), (Some("build"), Some("queued")));
+    let head = String::from_utf8(common::git(repo.path(), &["rev-parse", "HEAD"]).stdout).unwrap().trim().to_string();
+    assert_eq!(jobs[0]["commit_sha"], head);
+
+    // A runner claims it, clones the commit with its job token, reports.
+    let runner = FakeRunner::register(&server, "runner-1").await;
+    let build = runner.claim(5).await.expect("the build job");
+    assert_eq!(build.body["commit"], head);
+    let clone = tempfile::tempdir().unwrap();
+    let url = server.clone_url("box-filter-cpp", &build.token);
+    let cloned = common::git(clone.path(), &["clone", "-q", &url, "src"]);
+    assert!(cloned.status.success(), "{}", String::from_utf8_lossy(&cloned.stderr));
+    assert!(clone.path().join("src/info.json").is_file());
+    assert_eq!(build.send(&runner, Method::POST, "heartbeat", "".into()).await, 200);
+    assert_eq!(build.send(&runner, Method::POST, "log", "cmake --build: ok\n".into()).await, 204);
+    assert_eq!(build.finish(&runner, json!({ "state": "succeeded" })).await.0, 200);
+    assert!(log_text(&server, &ada, &build.id).await.contains("cmake --build: ok"));
+    // The job is over: its token is worthless, also for git.
+    assert_eq!(build.send(&runner, Method::POST, "heartbeat", "".into()).await, 410);
+    assert!(!common::git(clone.path(), &["clone", "-q", &url, "again"]).status.success());
+
+    // FBKSD_RUN from a push: a benchmark job.
+    common::commit_all(repo.path(), "run it");
+    let (pushed, output) = push(repo.path(), &server.clone_url("box-filter-cpp", &ada.token), &["FBKSD_RUN"]);
+    assert!(pushed, "{output}");
+    let bench = runner.claim(5).await.expect("the benchmark job");
+    assert_eq!(bench.body["job"]["kind"], "benchmark");
+    common::upload_results(&runner, &bench, 1.0).await;
+    let (status, done) = bench.finish(&runner, json!({ "state": "succeeded" })).await;
+    assert_eq!(status, 200, "{done}");
+    let result_id = done["result_id"].as_str().unwrap().to_string();
+    let private_url = format!("{}/results/{result_id}", server.url);
+    assert!(log_text(&server, &ada, &bench.id).await.contains(&private_url), "the private URL is in the job log");
+    assert!(server.mails_to("ada@example.org").last().unwrap().contains(&private_url), "and in a mail");
+
+    // The private result: its owner sees it beside the (empty) leaderboard.
+    let (status, result) =
+        json_of(ada.api(Method::GET, format!("{}/api/v1/results/{result_id}", server.url)).send().await.unwrap()).await;
+    assert_eq!(status, 200, "{result}");
+    assert_eq!(result["runs"].as_array().unwrap().len(), 4);
+    assert_eq!(result["result"]["commit_sha"].as_str().unwrap().len(), 40);
+    assert_eq!(result["result"]["provenance"]["image_digest"], "sha256:0123");
+    assert_eq!(result["result"]["info"]["short_name"], "box-filter-cpp");
+    assert_eq!(result["board"]["standings"][0]["highlighted"], true);
+    let image = reqwest::get(format!("{private_url}/files/sin-bands/4_0.png")).await.unwrap();
+    assert_eq!(image.status(), 404, "anonymous users cannot fetch a private result's files");
+
+    // Another user can see none of it.
+    let bob = server.user("bob@example.org").await;
+    let bob_get = |path: String| bob.api(Method::GET, format!("{}{path}", server.url)).send();
+    assert_eq!(bob_get(format!("/api/v1/results/{result_id}")).await.unwrap().status(), 404);
+    assert_eq!(bob_get(format!("/api/v1/jobs/{}/log", bench.id)).await.unwrap().status(), 404);
+    assert_eq!(bob_get("/api/v1/projects/box-filter-cpp".into()).await.unwrap().status(), 404);
+    for (method, tail) in [(Method::POST, "/publish"), (Method::POST, "/unpublish"), (Method::DELETE, "")] {
+        let response =
+            bob.api(method, format!("{}/api/v1/results/{result_id}{tail}", server.url)).send().await.unwrap();
+        assert_eq!(response.status(), 404, "bob {tail}");
+    }
+    let (pushed, output) = push(repo.path(), &server.clone_url("box-filter-cpp", &bob.token), &[]);
+    assert!(!pushed && output.contains("not found"), "bob cannot push (nor learn the project exists): {output}");
+    let (pushed, output) = push(repo.path(), &server.clone_url("box-filter-cpp", "fbksd_wrong"), &[]);
+    assert!(!pushed && output.contains("Authentication failed"), "{output}");
+
+    // Publishing puts it on the public leaderboard.
+    let leaderboard =
+        || async { json_of(reqwest::get(format!("{}/api/v1/leaderboard", server.url)).await.unwrap()).await.1 };
+    assert_eq!(leaderboard().await["standings"].as_array().unwrap().len(), 0);
+    let published =
+        ada.api(Method::POST, format!("{}/api/v1/results/{result_id}/publish", server.url)).send().await.unwrap();
+    assert_eq!(published.status(), 200);
+    let board = leaderboard().await;
+    assert_eq!(board["standings"][0]["technique"], "box-filter-cpp");
+    assert_eq!(board["groups"].as_array().unwrap().len(), 4, "two scenes at two budgets");
+    assert_eq!(board["sort"], "MSE");
+    assert_eq!(reqwest::get(format!("{private_url}/files/sin-bands/4_0.png")).await.unwrap().status(), 200);
+    assert_eq!(
+        bob_get(format!("/api/v1/results/{result_id}")).await.unwrap().status(),
+        200,
+        "published: everyone sees it"
+    );
+
+    // Unpublish, then publish again with FBKSD_PUBLISH through the API.
+    ada.api(Method::POST, format!("{}/api/v1/results/{result_id}/unpublish", server.url)).send().await.unwrap();
+    assert_eq!(leaderboard().await["standings"].as_array().unwrap().len(), 0);
+    let (status, body) = json_of(
+        ada.api(Method::POST, format!("{}/api/v1/projects/box-filter-cpp/pipelines", server.url))
+            .json(&json!({ "variables": { "FBKSD_PUBLISH": result_id } }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, 201, "{body}");
+    assert_eq!((body["job"]["kind"].as_str(), body["job"]["state"].as_str()), (Some("publish"), Some("succeeded")));
+    assert_eq!(leaderboard().await["standings"][0]["result_id"], result_id.as_str());
+
+    // Discard: gone for everyone, the owner too.
+    let discarded = ada.api(Method::DELETE, format!("{}/api/v1/results/{result_id}", server.url)).send().await.unwrap();
+    assert_eq!(discarded.status(), 204);
+    assert_eq!(
+        ada.api(Method::GET, format!("{}/api/v1/results/{result_id}", server.url)).send().await.unwrap().status(),
+        404
+    );
+    assert_eq!(leaderboard().await["standings"].as_array().unwrap().len(), 0);
+});
+
+on_both_databases!(a_lost_lease_queues_the_job_again_for_another_runner, |db: Db| async move {
+    let server = spawn_with(db, |c| c.lease_seconds = 1).await;
+    let ada = server.user("ada@example.org").await;
+    create_project(&server, &ada, "lease", "private").await;
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("lease", &ada.token), &[]).0);
+
+    let (first, second) = (FakeRunner::register(&server, "dies").await, FakeRunner::register(&server, "lives").await);
+    let lost = first.claim(5).await.unwrap();
+    assert_eq!(second.claim(0).await.map(|j| j.id), None, "a running job is not handed out twice");
+    // `first` stops heart-beating; after the lease, `second` gets the job.
+    let taken = second.claim(5).await.expect("requeued after the lease");
+    assert_eq!(taken.id, lost.id);
+    assert_eq!(taken.body["job"]["attempts"], 2);
+    assert_eq!(lost.send(&first, Method::POST, "heartbeat", "".into()).await, 410, "the old token is void");
+    assert_eq!(lost.send(&first, Method::POST, "log", "late\n".into()).await, 410);
+    assert_eq!(taken.finish(&second, json!({ "state": "succeeded" })).await.0, 200);
+    let log = log_text(&server, &ada, &taken.id).await;
+    assert!(log.contains("lease expired") && !log.contains("late"), "{log}");
+});
+
+on_both_databases!(runners_racing_for_jobs_get_each_job_once, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    create_project(&server, &ada, "race", "private").await;
+    let repo = technique_repository("box-filter-python");
+    for i in 0..3 {
+        common::commit_all(repo.path(), &format!("commit {i}"));
+        assert!(push(repo.path(), &server.clone_url("race", &ada.token), &[]).0);
+    }
+    let mut runners = Vec::new();
+    for i in 0..8 {
+        runners.push(FakeRunner::register(&server, &format!("r{i}")).await);
+    }
+    let claims = futures_util::future::join_all(runners.iter().map(|r| r.claim(1))).await;
+    let mut ids: Vec<String> = claims.into_iter().flatten().map(|j| j.id).collect();
+    ids.sort();
+    let count = ids.len();
+    ids.dedup();
+    assert_eq!((count, ids.len()), (3, 3), "three jobs, each claimed by exactly one of eight runners");
+});
+
+on_both_databases!(tokens_only_do_what_they_are_for, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    create_project(&server, &ada, "tokens", "public").await;
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("tokens", &ada.token), &[]).0);
+    common::commit_all(repo.path(), "second");
+    assert!(push(repo.path(), &server.clone_url("tokens", &ada.token), &[]).0);
+    let runner = FakeRunner::register(&server, "r").await;
+    let (a, b) = (runner.claim(1).await.unwrap(), runner.claim(1).await.unwrap());
+
+    // A job token cannot touch another job.
+    let cross = runner.job_request(Method::POST, &b.id, &a.token, "heartbeat").send().await.unwrap();
+    assert_eq!(
+        json_of(cross).await,
+        (403, json!({ "error": "wrong_job", "message": "this job token belongs to another job" }))
+    );
+    // Runner and job tokens cannot act as a user, nor push.
+    for token in [&runner.token, &a.token] {
+        let me =
+            reqwest::Client::new().get(format!("{}/api/v1/me", server.url)).bearer_auth(token).send().await.unwrap();
+        assert_eq!(json_of(me).await.1["error"], "not_a_user_token");
+        let (pushed, _) = push(repo.path(), &server.clone_url("tokens", token), &[]);
+        assert!(!pushed);
+    }
+    // A user token cannot claim jobs; a bad registration token registers nothing.
+    let claim = reqwest::Client::new()
+        .post(format!("{}/api/v1/runners/jobs", server.url))
+        .bearer_auth(&ada.token)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(claim.status(), 401);
+    let register = reqwest::Client::new()
+        .post(format!("{}/api/v1/runners", server.url))
+        .json(&json!({ "registration_token": "guess", "name": "x" }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(register.status(), 401);
+    // A user cannot report on a job with their own token.
+    let forged = runner
+        .job_request(Method::POST, &a.id, &ada.token, "finish")
+        .json(&json!({ "state": "succeeded" }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(forged.status(), 401);
+    // Only administrators administer.
+    let admin_only = ada.api(Method::GET, format!("{}/api/v1/admin/jobs", server.url)).send().await.unwrap();
+    assert_eq!(json_of(admin_only).await.1["error"], "not_admin");
+});

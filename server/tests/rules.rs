@@ -1,0 +1,300 @@
+//! Bad input, quotas and administration, through the real API and real
+//! git: each refusal says what was wrong, and nothing is half-written.
+
+mod common;
+
+use common::{push, spawn, spawn_with, technique_repository, Db, FakeRunner};
+use reqwest::Method;
+use serde_json::{json, Value};
+
+async fn json_of(response: reqwest::Response) -> (u16, Value) {
+    let status = response.status().as_u16();
+    (status, response.json().await.unwrap_or_default())
+}
+
+async fn new_project(server: &common::TestServer, user: &common::TestUser, name: &str) {
+    let response = user
+        .api(Method::POST, format!("{}/api/v1/projects", server.url))
+        .json(&json!({ "name": name, "visibility": "private" }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status(), 201);
+}
+
+async fn jobs_of(server: &common::TestServer, user: &common::TestUser, name: &str) -> Vec<Value> {
+    let body =
+        json_of(user.api(Method::GET, format!("{}/api/v1/projects/{name}", server.url)).send().await.unwrap()).await.1;
+    body["jobs"].as_array().cloned().unwrap_or_default()
+}
+
+async fn run_pipeline(
+    server: &common::TestServer,
+    user: &common::TestUser,
+    name: &str,
+    variables: Value,
+) -> (u16, Value) {
+    json_of(
+        user.api(Method::POST, format!("{}/api/v1/projects/{name}/pipelines", server.url))
+            .json(&json!({ "variables": variables }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await
+}
+
+on_both_databases!(a_broken_repository_fails_its_build_at_once_and_mails_the_author, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    new_project(&server, &ada, "broken").await;
+    let repo = technique_repository("box-filter-cpp");
+    std::fs::write(repo.path().join("info.json"), r#"{"short_name": "broken", "technique_type": "filter"}"#).unwrap();
+    common::commit_all(repo.path(), "typo");
+    assert!(push(repo.path(), &server.clone_url("broken", &ada.token), &[]).0, "the push itself lands");
+
+    let jobs = jobs_of(&server, &ada, "broken").await;
+    assert_eq!(jobs[0]["state"], "failed");
+    assert_eq!(jobs[0]["failure_reason"], "build_failed");
+    let message = jobs[0]["message"].as_str().unwrap();
+    assert!(message.contains("\"technique_type\" \"filter\" is unknown"), "{message}");
+    let mail = server.mails_to("ada@example.org").pop().unwrap();
+    assert!(mail.contains("failed") && mail.contains("technique_type"), "{mail}");
+    // No runner is ever given it.
+    let runner = FakeRunner::register(&server, "r").await;
+    assert!(runner.claim(0).await.is_none());
+    // The API refuses a run of the same commit outright, writing nothing.
+    let (status, body) = run_pipeline(&server, &ada, "broken", json!({ "FBKSD_RUN": "1" })).await;
+    assert_eq!((status, body["error"].as_str()), (400, Some("invalid_repository")));
+    assert_eq!(jobs_of(&server, &ada, "broken").await.len(), 1);
+});
+
+on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is_written, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    new_project(&server, &ada, "vars").await;
+    let repo = technique_repository("box-filter-python");
+    let url = server.clone_url("vars", &ada.token);
+
+    let (pushed, output) = push(repo.path(), &url, &["FBKSD_RUNN"]);
+    assert!(!pushed);
+    assert!(output.contains("unknown push option 'FBKSD_RUNN'"), "{output}");
+    let (pushed, output) = push(repo.path(), &url, &["FBKSD_PUBLISH=not-a-uuid"]);
+    assert!(!pushed && output.contains("needs the UUID"), "{output}");
+    assert!(jobs_of(&server, &ada, "vars").await.is_empty(), "no pipeline, and the refs did not move");
+    assert_eq!(common::git(repo.path(), &["ls-remote", &url]).stdout.len(), 0);
+
+    assert!(push(repo.path(), &url, &[]).0);
+    for (variables, code) in [
+        (json!({ "FBKSD_RNU": "1" }), "unknown_variable"),
+        (json!({ "FBKSD_PUBLISH": "1234" }), "invalid_variable"),
+        (json!({ "FBKSD_RUN": "1", "FBKSD_PUBLISH": uuid::Uuid::new_v4().to_string() }), "conflicting_variables"),
+    ] {
+        let (status, body) = run_pipeline(&server, &ada, "vars", variables.clone()).await;
+        assert_eq!((status, body["error"].as_str()), (400, Some(code)), "{variables}: {body}");
+    }
+    let (status, body) =
+        run_pipeline(&server, &ada, "vars", json!({ "FBKSD_PUBLISH": uuid::Uuid::new_v4().to_string() })).await;
+    assert_eq!((status, body["error"].as_str()), (404, Some("not_found")), "{body}");
+    assert_eq!(jobs_of(&server, &ada, "vars").await.len(), 1, "only the push's build job");
+
+    // Invalid UUIDs and unknown projects.
+    let bad = ada.api(Method::GET, format!("{}/api/v1/results/not-a-uuid", server.url)).send().await.unwrap();
+    assert_eq!(json_of(bad).await.1["error"], "invalid_uuid");
+    let (status, body) = json_of(
+        ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
+            .json(&json!({ "name": "Bad Name" }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!((status, body["error"].as_str()), (400, Some("invalid_name")));
+    let (status, _) = json_of(
+        ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
+            .json(&json!({ "name": "vars" }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, 409);
+});
+
+on_both_databases!(oversized_pushes_and_uploads_are_refused, |db: Db| async move {
+    let server = spawn_with(db, |c| {
+        c.max_push_bytes = 64 * 1024;
+        c.max_upload_bytes = 4096;
+    })
+    .await;
+    let ada = server.user("ada@example.org").await;
+    new_project(&server, &ada, "big").await;
+    let repo = technique_repository("box-filter-python");
+    // Incompressible bytes, well over the limit.
+    let mut x = 0x9e37_79b9_7f4a_7c15u64;
+    let noise: Vec<u8> = (0..400_000)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect();
+    std::fs::write(repo.path().join("weights.bin"), noise).unwrap();
+    common::commit_all(repo.path(), "big weights");
+    let (pushed, output) = push(repo.path(), &server.clone_url("big", &ada.token), &[]);
+    assert!(!pushed, "{output}");
+    assert!(output.contains("maximum allowed size") || output.contains("413"), "{output}");
+    assert!(jobs_of(&server, &ada, "big").await.is_empty());
+
+    // A small push, then uploads over the job's limit.
+    assert!(common::git(repo.path(), &["reset", "-q", "--hard", "HEAD~1"]).status.success());
+    assert!(push(repo.path(), &server.clone_url("big", &ada.token), &["FBKSD_RUN"]).0);
+    let runner = FakeRunner::register(&server, "r").await;
+    let job = runner.claim(1).await.unwrap();
+    let status = job.send(&runner, Method::PUT, "files/a.png", vec![0u8; 5000].into()).await;
+    assert_eq!(status, 413);
+    let status = job.send(&runner, Method::PUT, "files/../escape.png", vec![0u8; 10].into()).await;
+    assert!(status == 400 || status == 404, "{status}");
+    // Inconsistent results are refused with the problem named.
+    let mut upload = common::results_upload(1.0);
+    upload["runs"][0]["scene"] = json!("nowhere");
+    let response =
+        runner.job_request(Method::PUT, &job.id, &job.token, "results").body(upload.to_string()).send().await.unwrap();
+    let (status, body) = json_of(response).await;
+    assert_eq!((status, body["error"].as_str()), (400, Some("invalid_output")));
+    assert!(body["message"].as_str().unwrap().contains("\"nowhere\" is not in \"scenes\""), "{body}");
+    // Success without results stores nothing.
+    let (status, body) = job.finish(&runner, json!({ "state": "succeeded" })).await;
+    assert_eq!((status, body["error"].as_str()), (409, Some("no_results")));
+    let (status, body) = job.finish(&runner, json!({ "state": "failed" })).await;
+    assert_eq!((status, body["error"].as_str()), (400, Some("missing_reason")));
+    let (status, _) = job
+        .finish(&runner, json!({ "state": "failed", "reason": "invalid_output", "message": "NaN in 3 pixels" }))
+        .await;
+    assert_eq!(status, 200);
+    let jobs = jobs_of(&server, &ada, "big").await;
+    assert_eq!(
+        (jobs[0]["state"].as_str(), jobs[0]["failure_reason"].as_str()),
+        (Some("failed"), Some("invalid_output"))
+    );
+    assert!(jobs[0]["result_id"].is_null());
+});
+
+on_both_databases!(quotas_bound_queued_jobs_and_daily_runs, |db: Db| async move {
+    let server = spawn_with(db, |c| {
+        c.max_queued_jobs_per_user = 2;
+        c.max_runs_per_day = 2;
+    })
+    .await;
+    let ada = server.user("ada@example.org").await;
+    new_project(&server, &ada, "quota").await;
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("quota", &ada.token), &[]).0, "one build queued");
+    let run = || run_pipeline(&server, &ada, "quota", json!({ "FBKSD_RUN": "1" }));
+    let (status, first) = run().await;
+    assert_eq!(status, 201);
+    let (status, body) = run().await;
+    assert_eq!((status, body["error"].as_str()), (429, Some("quota_queued")), "{body}");
+
+    // Cancelled before starting: it does not count.
+    let cancel =
+        ada.api(Method::POST, format!("{}/api/v1/jobs/{}/cancel", server.url, first["job"]["id"].as_str().unwrap()));
+    assert_eq!(cancel.send().await.unwrap().status(), 200);
+    let runner = FakeRunner::register(&server, "r").await;
+    runner.claim(0).await.unwrap().finish(&runner, json!({ "state": "succeeded" })).await;
+
+    // An infrastructure failure on the last attempt does not count either.
+    let (status, _) = run().await;
+    assert_eq!(status, 201);
+    for _ in 0..3 {
+        let job = runner.claim(1).await.unwrap();
+        job.finish(
+            &runner,
+            json!({ "state": "failed", "reason": "infrastructure_error", "message": "docker is down" }),
+        )
+        .await;
+    }
+    let (status, body) = run().await;
+    assert_eq!(status, 201, "{body}");
+    let job = runner.claim(1).await.unwrap();
+    job.finish(&runner, json!({ "state": "failed", "reason": "crashed", "message": "segfault" })).await;
+    let (status, _) = run().await;
+    assert_eq!(status, 201, "two runs count now");
+    let (status, body) = run().await;
+    assert_eq!((status, body["error"].as_str()), (429, Some("quota_runs")), "{body}");
+});
+
+on_both_databases!(administrators_cancel_requeue_hide_and_start_seasons, |db: Db| async move {
+    let server = spawn(db).await;
+    let admin = server.admin().await;
+    let ada = server.user("ada@example.org").await;
+    new_project(&server, &ada, "seasoned").await;
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("seasoned", &ada.token), &["FBKSD_RUN"]).0);
+    let runner = FakeRunner::register(&server, "r").await;
+    let job = runner.claim(1).await.unwrap();
+
+    // Runners and their health.
+    let (_, runners) =
+        json_of(admin.api(Method::GET, format!("{}/api/v1/admin/runners", server.url)).send().await.unwrap()).await;
+    assert_eq!(runners[0]["runner"]["running_jobs"], 1);
+    assert_eq!(runners[0]["healthy"], true);
+    assert_eq!(runners[0]["runner"]["machine"]["cpu_model"], "test CPU");
+
+    // Cancel a running job: the runner learns it at its next report.
+    let cancelled =
+        admin.api(Method::POST, format!("{}/api/v1/jobs/{}/cancel", server.url, job.id)).send().await.unwrap();
+    assert_eq!(cancelled.status(), 200);
+    assert_eq!(job.send(&runner, Method::POST, "heartbeat", "".into()).await, 410);
+    // Requeue it; it runs to the end this time.
+    let requeued =
+        admin.api(Method::POST, format!("{}/api/v1/admin/jobs/{}/requeue", server.url, job.id)).send().await.unwrap();
+    assert_eq!(requeued.status(), 200);
+    let job = runner.claim(1).await.unwrap();
+    common::upload_results(&runner, &job, 1.0).await;
+    let result_id =
+        job.finish(&runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string();
+    ada.api(Method::POST, format!("{}/api/v1/results/{result_id}/publish", server.url)).send().await.unwrap();
+
+    // Hide it: off the leaderboard, and its owner cannot publish it again.
+    let hide = admin
+        .api(Method::POST, format!("{}/api/v1/admin/results/{result_id}/hide", server.url))
+        .json(&json!({ "reason": "tuned on the references" }));
+    assert_eq!(hide.send().await.unwrap().status(), 204);
+    let board = json_of(reqwest::get(format!("{}/api/v1/leaderboard", server.url)).await.unwrap()).await.1;
+    assert!(board["standings"].as_array().unwrap().is_empty());
+    let (status, body) = json_of(
+        ada.api(Method::POST, format!("{}/api/v1/results/{result_id}/publish", server.url)).send().await.unwrap(),
+    )
+    .await;
+    assert_eq!((status, body["error"].as_str()), (403, Some("hidden")));
+    let unhide = admin.api(Method::DELETE, format!("{}/api/v1/admin/results/{result_id}/hide", server.url));
+    assert_eq!(unhide.send().await.unwrap().status(), 204);
+
+    // A new season re-runs every published technique; the old board stays.
+    let (status, season) = json_of(
+        admin
+            .api(Method::POST, format!("{}/api/v1/admin/seasons", server.url))
+            .json(&json!({ "note": "added caustics scenes" }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!((status, season["season"].as_i64()), (201, Some(2)), "{season}");
+    assert_eq!(season["queued"].as_array().unwrap().len(), 1);
+    let url = server.url.clone();
+    let board = |season: i64| {
+        let url = url.clone();
+        async move { json_of(reqwest::get(format!("{url}/api/v1/leaderboard?season={season}")).await.unwrap()).await.1 }
+    };
+    assert!(board(2).await["standings"].as_array().unwrap().is_empty());
+    assert_eq!(board(1).await["standings"][0]["technique"], "seasoned");
+    let rerun = runner.claim(1).await.unwrap();
+    assert_eq!(rerun.body["job"]["season"], 2);
+    common::upload_results(&runner, &rerun, 0.5).await;
+    rerun.finish(&runner, json!({ "state": "succeeded" })).await;
+    assert_eq!(board(2).await["standings"][0]["technique"], "seasoned", "published on success");
+    assert_eq!(board(1).await["standings"][0]["result_id"], result_id.as_str(), "the old season is kept");
+});
