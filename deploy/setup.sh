@@ -8,7 +8,9 @@ APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3
     # OpenCV headers: the thesis metric example A.3 is compiled by the tests.
     libopencv-core-dev libopencv-imgproc-dev libopencv-highgui-dev
     # fbksd-server: TLS for SMTP; PostgreSQL for its tests (and deployments).
-    libssl-dev postgresql)
+    libssl-dev postgresql git
+    # A real browser for the page tests (the live job log).
+    chromium)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do

@@ -23,7 +23,13 @@ pub struct Credentials {
 pub async fn register(State(state): State<AppState>, Json(body): Json<Credentials>) -> Result<Response, ApiError> {
     let email = Email::parse(&body.email)?;
     let password = Password::parse(&body.password)?;
-    let user = accounts::create_user(&state.pool, &email, &password, false, false).await?;
+    let user = create_and_mail(&state, &email, &password).await?;
+    Ok((StatusCode::CREATED, Json(json!({ "id": user.id, "email": user.email, "verified": false }))).into_response())
+}
+
+/// Creates an unverified account and mails its verification link.
+pub async fn create_and_mail(state: &AppState, email: &Email, password: &Password) -> Result<accounts::User, ApiError> {
+    let user = accounts::create_user(&state.pool, email, password, false, false).await?;
     let token = accounts::issue_email_token(&state.pool, &user.id, "verify").await?;
     let link = format!("{}/accounts/verify?token={token}", state.public_url);
     let body = format!(
@@ -31,7 +37,7 @@ pub async fn register(State(state): State<AppState>, Json(body): Json<Credential
          The link works once, for 48 hours. If you did not register, ignore this message.\n"
     );
     state.mailer.send(&state.config.mail_from, email.as_str(), "Confirm your FBKSD account", body).await?;
-    Ok((StatusCode::CREATED, Json(json!({ "id": user.id, "email": user.email, "verified": false }))).into_response())
+    Ok(user)
 }
 
 /// A verification token.

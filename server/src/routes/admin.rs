@@ -85,7 +85,12 @@ pub async fn new_season(
     Admin(_): Admin,
     Json(body): Json<NewSeason>,
 ) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
-    let note = body.note.trim();
+    Ok((StatusCode::CREATED, Json(start_season(&state, &body.note).await?)))
+}
+
+/// Starts a season and queues the re-runs; what was queued and skipped.
+pub async fn start_season(state: &AppState, note: &str) -> Result<serde_json::Value, ApiError> {
+    let note = note.trim();
     if note.is_empty() {
         return Err(ApiError::bad_request("missing_note", "say what changed in the scene pool"));
     }
@@ -115,7 +120,7 @@ pub async fn new_season(
         match (project, owner) {
             (Some(project), Some(owner)) => {
                 let started = crate::pipelines::start(
-                    &state,
+                    state,
                     &project,
                     &owner,
                     &set.commit_sha,
@@ -129,5 +134,5 @@ pub async fn new_season(
             _ => skipped.push(json!({ "technique": set.technique, "why": "its project or owner was deleted" })),
         }
     }
-    Ok((StatusCode::CREATED, Json(json!({ "season": previous + 1, "queued": queued, "skipped": skipped }))))
+    Ok(json!({ "season": previous + 1, "queued": queued, "skipped": skipped }))
 }

@@ -11,6 +11,7 @@
 
 mod accounts;
 mod admin;
+mod pages;
 mod projects;
 mod results;
 mod runner;
@@ -69,15 +70,35 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/admin/runner-registration-token", post(admin::rotate_registration_token))
         .route("/api/v1/admin/results/{id}/hide", post(results::hide).delete(results::unhide))
         .route("/api/v1/admin/seasons", post(admin::new_season))
+        // Pages, with CSRF-checked forms.
+        .route("/", get(pages::home))
+        .route("/static/{name}", get(pages::static_file))
+        .route("/login", get(pages::login_form).post(pages::login))
+        .route("/register", get(pages::register_form).post(pages::register))
+        .route("/logout", post(pages::logout))
+        .route("/settings", get(pages::settings))
+        .route("/settings/tokens", post(pages::create_token))
+        .route("/settings/tokens/{id}/revoke", post(pages::revoke_token))
+        .route("/projects", get(pages::projects_page).post(pages::create_project))
+        .route("/projects/{name}", get(pages::project_page))
+        .route("/projects/{name}/run", post(pages::run_project))
+        .route("/jobs/{id}", get(pages::job_page))
+        .route("/jobs/{id}/cancel", post(pages::cancel_job))
+        .route("/results/", get(pages::leaderboard_page))
+        .route("/results/{id}", get(pages::result_page))
+        .route("/results/{id}/{action}", post(pages::result_action))
+        .route("/admin", get(pages::admin_page))
+        .route("/admin/jobs/{id}/requeue", post(pages::admin_requeue))
+        .route("/admin/hide", post(pages::admin_hide))
+        .route("/admin/seasons", post(pages::admin_season))
         .with_state(state)
         // A bug in one handler answers 500 instead of dropping the connection.
         .layer(tower_http::catch_panic::CatchPanicLayer::new())
 }
 
 /// The value of cookie `name` in the request.
-fn cookie<'a>(parts: &'a Parts, name: &str) -> Option<&'a str> {
-    parts
-        .headers
+fn cookie<'a>(headers: &'a axum::http::HeaderMap, name: &str) -> Option<&'a str> {
+    headers
         .get_all(axum::http::header::COOKIE)
         .iter()
         .filter_map(|v| v.to_str().ok())
@@ -100,7 +121,8 @@ impl FromRequestParts<AppState> for SessionUser {
     type Rejection = ApiError;
 
     async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
-        let token = cookie(parts, SESSION_COOKIE).ok_or_else(|| ApiError::unauthorized("log in first"))?.to_string();
+        let token =
+            cookie(&parts.headers, SESSION_COOKIE).ok_or_else(|| ApiError::unauthorized("log in first"))?.to_string();
         let (user, csrf) = crate::accounts::session_user(&state.pool, &token)
             .await?
             .ok_or_else(|| ApiError::unauthorized("your session has ended: log in again"))?;
@@ -160,7 +182,9 @@ impl FromRequestParts<AppState> for MaybeUser {
     type Rejection = ApiError;
 
     async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
-        if parts.headers.contains_key(axum::http::header::AUTHORIZATION) || cookie(parts, SESSION_COOKIE).is_some() {
+        if parts.headers.contains_key(axum::http::header::AUTHORIZATION)
+            || cookie(&parts.headers, SESSION_COOKIE).is_some()
+        {
             match Caller::from_request_parts(parts, state).await {
                 Ok(c) => return Ok(MaybeUser(Some(c.user))),
                 // An expired session reads as anonymous; a bad token is an error.

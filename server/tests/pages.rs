@@ -1,0 +1,212 @@
+//! The HTML pages as a browser uses them: forms with their CSRF tokens,
+//! the private results page beside the leaderboard, who sees what; and
+//! one test in a real browser (Chromium, headless) that the job page
+//! streams a running job's log live.
+
+mod common;
+
+use common::{push, spawn, technique_repository, Db, FakeRunner};
+use reqwest::Method;
+use serde_json::json;
+
+/// The value of the hidden `csrf_token` field in a page.
+fn csrf_in(page: &str) -> String {
+    let at = page.find("name=\"csrf_token\" value=\"").expect("a form with a CSRF token") + 25;
+    page[at..].split('"').next().unwrap().to_string()
+}
+
+async fn text(response: reqwest::Response) -> (u16, String) {
+    (response.status().as_u16(), response.text().await.unwrap())
+}
+
+on_both_databases!(forms_register_log_in_and_create_projects_with_csrf_tokens, |db: Db| async move {
+    let server = spawn(db).await;
+    let browser = server.browser();
+    let form = |path: &str, fields: &[(&str, &str)]| {
+        let fields: Vec<(String, String)> = fields.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        browser.post(format!("{}{path}", server.url)).form(&fields).send()
+    };
+
+    // Registration: the form's token must match its cookie.
+    let (_, page) = text(browser.get(format!("{}/register", server.url)).send().await.unwrap()).await;
+    let csrf = csrf_in(&page);
+    let forged = server
+        .browser()
+        .post(format!("{}/register", server.url))
+        .form(&[("csrf_token", csrf.as_str()), ("email", "x@example.org"), ("password", "long enough pass")])
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(forged.status(), 403, "another site's post has no form cookie");
+    let (status, page) = text(
+        form("/register", &[("csrf_token", &csrf), ("email", "ada@example.org"), ("password", "short")]).await.unwrap(),
+    )
+    .await;
+    assert_eq!(status, 400);
+    assert!(page.contains("at least 10 characters"), "the form shows what was wrong");
+    let csrf = csrf_in(&page);
+    let (status, page) = text(
+        form("/register", &[("csrf_token", &csrf), ("email", "ada@example.org"), ("password", "long enough pass")])
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, 200);
+    assert!(page.contains("Check your mail"));
+    browser.get(server.link_in_mail("ada@example.org", "/accounts/verify")).send().await.unwrap();
+
+    // Log in, then create a project with the session's token.
+    let (_, page) = text(browser.get(format!("{}/login", server.url)).send().await.unwrap()).await;
+    let login = form(
+        "/login",
+        &[("csrf_token", &csrf_in(&page)), ("email", "ada@example.org"), ("password", "long enough pass")],
+    )
+    .await
+    .unwrap();
+    let (status, page) = text(login).await;
+    assert_eq!(status, 200, "{page}");
+    assert!(page.contains("Log out ada@example.org"));
+    let session_csrf = csrf_in(&page);
+    let (status, _) =
+        text(form("/projects", &[("csrf_token", "wrong"), ("name", "mine"), ("visibility", "public")]).await.unwrap())
+            .await;
+    assert_eq!(status, 403, "a wrong CSRF token is refused");
+    let (status, page) = text(
+        form("/projects", &[("csrf_token", &session_csrf), ("name", "mine"), ("visibility", "public")]).await.unwrap(),
+    )
+    .await;
+    assert_eq!(status, 200);
+    assert!(page.contains("git clone") && page.contains("/git/mine.git"), "{page}");
+
+    // Access tokens from the settings page are shown once and work.
+    let (_, page) =
+        text(form("/settings/tokens", &[("csrf_token", &session_csrf), ("name", "laptop")]).await.unwrap()).await;
+    let at = page.find("id=\"new-token\">").unwrap() + 15;
+    let token = &page[at..at + 70].split('<').next().unwrap();
+    let me = reqwest::Client::new().get(format!("{}/api/v1/me", server.url)).bearer_auth(token).send().await.unwrap();
+    assert_eq!(me.status(), 200);
+
+    // Logging out needs the token too, and ends the session.
+    assert_eq!(form("/logout", &[("csrf_token", "nope")]).await.unwrap().status(), 403);
+    form("/logout", &[("csrf_token", &session_csrf)]).await.unwrap();
+    let (_, page) = text(browser.get(format!("{}/projects", server.url)).send().await.unwrap()).await;
+    assert!(page.contains("Log in") && !page.contains("New project"));
+});
+
+on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its_owner_only, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    let bob = server.user("bob@example.org").await;
+    let runner = FakeRunner::register(&server, "r").await;
+    // Bob's technique is published; Ada's is not yet.
+    let mut results = Vec::new();
+    for (user, name, quality) in [(&bob, "bob-filter", 2.0), (&ada, "ada-filter", 1.0)] {
+        user.api(Method::POST, format!("{}/api/v1/projects", server.url))
+            .json(&json!({ "name": name, "visibility": "public" }))
+            .send()
+            .await
+            .unwrap();
+        let repo = technique_repository("box-filter-python");
+        assert!(push(repo.path(), &server.clone_url(name, &user.token), &["FBKSD_RUN"]).0);
+        let job = runner.claim(1).await.unwrap();
+        common::upload_results(&runner, &job, quality).await;
+        results.push(
+            job.finish(&runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string(),
+        );
+    }
+    let (bobs, adas) = (&results[0], &results[1]);
+    bob.api(Method::POST, format!("{}/api/v1/results/{bobs}/publish", server.url)).send().await.unwrap();
+
+    let page = |client: reqwest::Client, path: String| {
+        let url = format!("{}{path}", server.url);
+        async move { text(client.get(url).send().await.unwrap()).await }
+    };
+    let (status, private) = page(ada.browser.clone(), format!("/results/{adas}")).await;
+    assert_eq!(status, 200);
+    assert!(private.contains("Private") && private.contains("bob-filter") && private.contains("class=\"highlight\""));
+    // Ada's (better) technique ranks first on her private page.
+    let standings = &private[private.find("id=\"standings\"").unwrap()..];
+    assert!(standings.find("ada-filter").unwrap() < standings.find("bob-filter").unwrap());
+    for (client, who) in [(bob.browser.clone(), "another user"), (reqwest::Client::new(), "anonymous")] {
+        assert_eq!(page(client, format!("/results/{adas}")).await.0, 404, "{who}");
+    }
+    assert_eq!(page(reqwest::Client::new(), "/results/not-a-uuid".into()).await.0, 400);
+
+    // Publishing from the page puts it on the leaderboard.
+    let publish = ada
+        .browser
+        .post(format!("{}/results/{adas}/publish", server.url))
+        .form(&[("csrf_token", ada.csrf.as_str())])
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(publish.status(), 200);
+    let forged = bob
+        .browser
+        .post(format!("{}/results/{adas}/unpublish", server.url))
+        .form(&[("csrf_token", bob.csrf.as_str())])
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(forged.status(), 404, "only the owner unpublishes");
+    let (status, board) = page(reqwest::Client::new(), "/results/".into()).await;
+    assert_eq!(status, 200);
+    assert!(board.contains("ada-filter") && board.contains("bob-filter"));
+    assert!(board.contains("sin-bands") && board.contains("16 spp"));
+    // Sorting by SSIM (higher is better) and filtering by tag.
+    let (_, by_tag) = page(reqwest::Client::new(), "/results/?sort=SSIM&tag=dof".into()).await;
+    assert!(
+        by_tag.contains("Ranking by SSIM")
+            && by_tag.contains("defocus-checkerboard")
+            && !by_tag.contains("<h3>sin-bands")
+    );
+    // The technique page shows info.json and the history.
+    let (_, technique) = page(reqwest::Client::new(), "/projects/ada-filter".into()).await;
+    assert!(technique.contains("Box filter (Python)") && technique.contains("published"));
+});
+
+on_both_databases!(a_running_jobs_log_streams_live_to_a_real_browser, |db: Db| async move {
+    let Some(chromium) = ["chromium", "chromium-browser"].into_iter().find(|c| which(c)) else {
+        panic!("Chromium is not installed: deploy/setup.sh installs it");
+    };
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
+        .json(&json!({ "name": "live", "visibility": "public" }))
+        .send()
+        .await
+        .unwrap();
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("live", &ada.token), &[]).0);
+    let runner = FakeRunner::register(&server, "r").await;
+    let job = runner.claim(1).await.unwrap();
+
+    // The browser opens the page while the job runs; the runner writes
+    // after the page has loaded, then ends the job.
+    let url = format!("{}/jobs/{}", server.url, job.id);
+    let profile = tempfile::tempdir().unwrap();
+    let browser = tokio::process::Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=8000", "--dump-dom"])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(&url)
+        .output();
+    let writer = async {
+        tokio::time::sleep(std::time::Duration::from_millis(2500)).await;
+        assert_eq!(job.send(&runner, Method::POST, "log", "step 1: cmake configured\n".into()).await, 204);
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        assert_eq!(job.send(&runner, Method::POST, "log", "step 2: built\n".into()).await, 204);
+        job.finish(&runner, json!({ "state": "succeeded" })).await;
+    };
+    let (output, ()) = tokio::join!(browser, writer);
+    let dom = String::from_utf8_lossy(&output.unwrap().stdout).into_owned();
+    assert!(dom.contains("data-live=\"true\""), "the page was served while the job ran: {dom}");
+    assert!(dom.contains("step 1: cmake configured") && dom.contains("step 2: built"), "{dom}");
+    assert!(dom.contains("class=\"state-succeeded\""), "the end event updates the state: {dom}");
+});
+
+fn which(program: &str) -> bool {
+    std::process::Command::new("sh")
+        .args(["-c", &format!("command -v {program}")])
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
