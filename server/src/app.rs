@@ -24,6 +24,8 @@ pub struct AppState {
     /// Wakes runners' long polls when a job is queued on this instance
     /// (other instances' jobs are found by polling).
     pub job_queued: Arc<tokio::sync::Notify>,
+    /// Leaderboards kept in memory.
+    pub boards: crate::leaderboard::BoardCache,
 }
 
 /// A server ready to run: its listener is bound.
@@ -90,6 +92,7 @@ impl Application {
             git,
             postgres,
             job_queued: Arc::new(tokio::sync::Notify::new()),
+            boards: Default::default(),
         };
         Ok(Application { listener, router: crate::routes::router(state), admin, registration_token, url })
     }

@@ -3,6 +3,11 @@
 //! (scene, spp) groups shown. A private results page is the same board
 //! with one unpublished set added and marked.
 //!
+//! The published part of a season is kept in memory ([`BoardCache`]) and
+//! reloaded when the database's board version changes, so a page view
+//! costs one small query however many techniques are published, and every
+//! server instance sees every change.
+//!
 //! Ranking fixes the original's bias: a technique with no value in a group
 //! (its run failed) ranks last there instead of being skipped.
 
@@ -11,7 +16,8 @@ use fbksd_iqa::MetricInfo;
 use fbksd_manager::results::IndexEntry;
 use serde::Serialize;
 use sqlx::AnyPool;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::sync::{Arc, Mutex};
 
 /// One technique in one (scene, spp) group.
 #[derive(Debug, Clone, Serialize)]
@@ -92,23 +98,91 @@ pub struct BoardQuery {
     pub tag: Option<String>,
 }
 
+/// A public board's (sort metric, tag filter).
+type BoardKey = (Option<String>, Option<String>);
+
+/// The published sets of one season with their runs and scene tags.
+struct SeasonData {
+    version: i64,
+    sets: Vec<ResultSet>,
+    runs: Vec<StoredRun>,
+    tags: BTreeMap<String, BTreeSet<String>>,
+    /// Public boards already assembled, by (sort, tag).
+    boards: Mutex<HashMap<BoardKey, Arc<Board>>>,
+}
+
+/// Seasons' published data kept in memory, by season.
+#[derive(Clone, Default)]
+pub struct BoardCache(Arc<Mutex<HashMap<i64, Arc<SeasonData>>>>);
+
+impl BoardCache {
+    async fn season(&self, pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
+        use crate::results::Selection;
+        let version = crate::results::board_version(pool).await?;
+        if let Some(data) = self.0.lock().ok().and_then(|m| m.get(&season).cloned()) {
+            if data.version == version {
+                return Ok(data);
+            }
+        }
+        // Read after the version: the data is at least as new as the version it is kept under.
+        let mut tags = BTreeMap::new();
+        crate::results::scene_tags(pool, Selection::Published(season), &mut tags).await?;
+        let data = Arc::new(SeasonData {
+            version,
+            sets: crate::results::published(pool, season).await?,
+            runs: crate::results::runs(pool, Selection::Published(season)).await?,
+            tags,
+            boards: Mutex::new(HashMap::new()),
+        });
+        if let Ok(mut map) = self.0.lock() {
+            map.insert(season, data.clone());
+        }
+        Ok(data)
+    }
+}
+
 /// Builds the board of `query.season` (or `extra`'s season), adding
 /// `extra` (a private set) if given.
-pub async fn build(pool: &AnyPool, query: &BoardQuery, extra: Option<&ResultSet>) -> Result<Board, sqlx::Error> {
+pub async fn build(
+    pool: &AnyPool,
+    cache: &BoardCache,
+    query: &BoardQuery,
+    extra: Option<&ResultSet>,
+) -> Result<Arc<Board>, sqlx::Error> {
+    use crate::results::Selection;
     let season = match (query.season, extra) {
         (_, Some(set)) => set.season,
         (Some(s), None) => s,
         (None, None) => crate::results::current_season(pool).await?,
     };
-    let mut sets = crate::results::published(pool, season).await?;
-    if let Some(extra) = extra {
-        sets.retain(|s| s.id != extra.id);
-        sets.push(extra.clone());
+    let data = cache.season(pool, season).await?;
+    let highlighted = extra.map(|s| s.id.as_str());
+    match extra.filter(|e| !data.sets.iter().any(|s| s.id == e.id)) {
+        None if highlighted.is_none() => {
+            let key = (query.sort.clone(), query.tag.clone());
+            if let Some(board) = data.boards.lock().ok().and_then(|b| b.get(&key).cloned()) {
+                return Ok(board);
+            }
+            let board = Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, None));
+            if let Ok(mut boards) = data.boards.lock() {
+                // Bounded: only metric and tag names that exist are worth keeping.
+                if boards.len() < 256 {
+                    boards.insert(key, board.clone());
+                }
+            }
+            Ok(board)
+        }
+        None => Ok(Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, highlighted))),
+        Some(extra) => {
+            let mut sets = data.sets.clone();
+            sets.push(extra.clone());
+            let mut runs = data.runs.clone();
+            runs.extend(crate::results::runs(pool, Selection::One(&extra.id)).await?);
+            let mut tags = data.tags.clone();
+            crate::results::scene_tags(pool, Selection::One(&extra.id), &mut tags).await?;
+            Ok(Arc::new(assemble(season, &sets, &runs, &tags, query, highlighted)))
+        }
     }
-    let ids: Vec<String> = sets.iter().map(|s| s.id.clone()).collect();
-    let runs = crate::results::runs(pool, &ids).await?;
-    let tags = crate::results::scene_tags(pool, &ids).await?;
-    Ok(assemble(season, &sets, &runs, &tags, query, extra.map(|s| s.id.as_str())))
 }
 
 /// The pure part of [`build`].

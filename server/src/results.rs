@@ -223,20 +223,53 @@ pub async fn published(pool: &AnyPool, season: i64) -> Result<Vec<ResultSet>, sq
     rows.iter().map(set_of).collect()
 }
 
-/// The runs of some result sets.
-pub async fn runs(pool: &AnyPool, ids: &[String]) -> Result<Vec<StoredRun>, sqlx::Error> {
-    let mut out = Vec::new();
-    for id in ids {
-        let rows = sqlx::query(
-            "SELECT result_id, scene, spp, status, message, technique_ms, render_ms, used_samples, metric_values, image \
-             FROM result_runs WHERE result_id = $1 ORDER BY scene, spp",
-        )
-        .bind(id)
-        .fetch_all(pool)
-        .await?;
-        for r in rows {
+/// Which result sets a query reads.
+#[derive(Debug, Clone, Copy)]
+pub enum Selection<'a> {
+    /// The published, visible sets of a season.
+    Published(i64),
+    /// One set.
+    One(&'a str),
+}
+
+impl Selection<'_> {
+    /// The condition on `result_id`, with `$1` bound by [`Selection::bind`].
+    fn condition(self) -> &'static str {
+        match self {
+            Selection::Published(_) => {
+                "result_id IN (SELECT id FROM result_sets WHERE season = $1 AND published_at IS NOT NULL \
+                 AND hidden_reason IS NULL)"
+            }
+            Selection::One(_) => "result_id = $1",
+        }
+    }
+
+    fn bind<'q>(
+        self,
+        query: sqlx::query::Query<'q, sqlx::Any, sqlx::any::AnyArguments<'q>>,
+    ) -> sqlx::query::Query<'q, sqlx::Any, sqlx::any::AnyArguments<'q>>
+    where
+        Self: 'q,
+    {
+        match self {
+            Selection::Published(season) => query.bind(season),
+            Selection::One(id) => query.bind(id.to_string()),
+        }
+    }
+}
+
+/// The runs of the selected result sets (one query).
+pub async fn runs(pool: &AnyPool, which: Selection<'_>) -> Result<Vec<StoredRun>, sqlx::Error> {
+    let sql = format!(
+        "SELECT result_id, scene, spp, status, message, technique_ms, render_ms, used_samples, metric_values, image \
+         FROM result_runs WHERE {} ORDER BY result_id, scene, spp",
+        which.condition()
+    );
+    let rows = which.bind(sqlx::query(&sql)).fetch_all(pool).await?;
+    rows.iter()
+        .map(|r| {
             let values: String = r.try_get("metric_values")?;
-            out.push(StoredRun {
+            Ok(StoredRun {
                 result_id: r.try_get("result_id")?,
                 scene: r.try_get("scene")?,
                 spp: r.try_get("spp")?,
@@ -247,25 +280,24 @@ pub async fn runs(pool: &AnyPool, ids: &[String]) -> Result<Vec<StoredRun>, sqlx
                 used_samples: r.try_get("used_samples")?,
                 metrics: serde_json::from_str(&values).unwrap_or_default(),
                 image: r.try_get("image")?,
-            });
-        }
-    }
-    Ok(out)
+            })
+        })
+        .collect()
 }
 
-/// Scenes of some result sets: name → tags (the union over the sets).
-pub async fn scene_tags(pool: &AnyPool, ids: &[String]) -> Result<BTreeMap<String, BTreeSet<String>>, sqlx::Error> {
-    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for id in ids {
-        let rows =
-            sqlx::query("SELECT scene, tags FROM result_scenes WHERE result_id = $1").bind(id).fetch_all(pool).await?;
-        for r in rows {
-            let tags: String = r.try_get("tags")?;
-            let tags: Vec<String> = serde_json::from_str(&tags).unwrap_or_default();
-            out.entry(r.try_get("scene")?).or_default().extend(tags);
-        }
+/// Scenes of the selected result sets: name → tags (the union over the sets).
+pub async fn scene_tags(
+    pool: &AnyPool,
+    which: Selection<'_>,
+    out: &mut BTreeMap<String, BTreeSet<String>>,
+) -> Result<(), sqlx::Error> {
+    let sql = format!("SELECT scene, tags FROM result_scenes WHERE {}", which.condition());
+    for r in which.bind(sqlx::query(&sql)).fetch_all(pool).await? {
+        let tags: String = r.try_get("tags")?;
+        let tags: Vec<String> = serde_json::from_str(&tags).unwrap_or_default();
+        out.entry(r.try_get("scene")?).or_default().extend(tags);
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Everything needed to store a result set, decided before the transaction.
@@ -296,6 +328,7 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
     let now = now_ms();
     if new.publish {
         unpublish_others(tx, new.technique, new.season).await?;
+        boards_changed(&mut **tx).await?;
     }
     sqlx::query(
         "INSERT INTO result_sets (id, job_id, project_id, user_id, technique, info, commit_sha, season, provenance, \
@@ -348,6 +381,18 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
     Ok(id)
 }
 
+/// Records that what leaderboards show has changed (every server
+/// instance reloads its cached boards).
+pub async fn boards_changed<'e>(executor: impl sqlx::Executor<'e, Database = sqlx::Any>) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE board_version SET version = version + 1 WHERE id = 1").execute(executor).await?;
+    Ok(())
+}
+
+/// The current board version.
+pub async fn board_version(pool: &AnyPool) -> Result<i64, sqlx::Error> {
+    sqlx::query("SELECT version FROM board_version WHERE id = 1").fetch_one(pool).await?.try_get("version")
+}
+
 /// One published set per technique and season.
 async fn unpublish_others(
     tx: &mut sqlx::Transaction<'_, sqlx::Any>,
@@ -382,16 +427,13 @@ pub async fn publish(pool: &AnyPool, set: &ResultSet) -> Result<(), ApiError> {
         return Err(ApiError::forbidden("hidden", "an administrator hid this result set; it cannot be published"));
     }
     let mut tx = pool.begin().await?;
-    sqlx::query("UPDATE result_sets SET published_at = NULL WHERE technique = $1 AND season = $2")
-        .bind(&set.technique)
-        .bind(set.season)
-        .execute(&mut *tx)
-        .await?;
+    unpublish_others(&mut tx, &set.technique, set.season).await?;
     sqlx::query("UPDATE result_sets SET published_at = $1 WHERE id = $2")
         .bind(now_ms())
         .bind(&set.id)
         .execute(&mut *tx)
         .await?;
+    boards_changed(&mut *tx).await?;
     tx.commit().await?;
     Ok(())
 }
@@ -399,14 +441,14 @@ pub async fn publish(pool: &AnyPool, set: &ResultSet) -> Result<(), ApiError> {
 /// Takes the set off the leaderboard.
 pub async fn unpublish(pool: &AnyPool, id: &str) -> Result<(), sqlx::Error> {
     sqlx::query("UPDATE result_sets SET published_at = NULL WHERE id = $1").bind(id).execute(pool).await?;
-    Ok(())
+    boards_changed(pool).await
 }
 
 /// Deletes the set (rows and files).
 pub async fn discard(pool: &AnyPool, data_dir: &std::path::Path, id: &str) -> Result<(), sqlx::Error> {
     sqlx::query("DELETE FROM result_sets WHERE id = $1").bind(id).execute(pool).await?;
     let _ = tokio::fs::remove_dir_all(files_dir(data_dir, id)).await;
-    Ok(())
+    boards_changed(pool).await
 }
 
 /// Hides (with a reason) or shows again a set (administration).
@@ -416,6 +458,7 @@ pub async fn set_hidden(pool: &AnyPool, id: &str, reason: Option<&str>) -> Resul
         .bind(id)
         .execute(pool)
         .await?;
+    boards_changed(pool).await?;
     Ok(done.rows_affected() > 0)
 }
 

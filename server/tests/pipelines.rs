@@ -190,9 +190,15 @@ on_both_databases!(runners_racing_for_jobs_get_each_job_once, |db: Db| async mov
         common::commit_all(repo.path(), &format!("commit {i}"));
         assert!(push(repo.path(), &server.clone_url("race", &ada.token), &[]).0);
     }
+    // On PostgreSQL, half the runners talk to a second server instance.
+    let second = match db {
+        Db::Postgres => Some(server.another_instance().await),
+        Db::Sqlite => None,
+    };
     let mut runners = Vec::new();
     for i in 0..8 {
-        runners.push(FakeRunner::register(&server, &format!("r{i}")).await);
+        let instance = if i % 2 == 1 { second.as_ref().unwrap_or(&server) } else { &server };
+        runners.push(FakeRunner::register(instance, &format!("r{i}")).await);
     }
     let claims = futures_util::future::join_all(runners.iter().map(|r| r.claim(1))).await;
     let mut ids: Vec<String> = claims.into_iter().flatten().map(|j| j.id).collect();
@@ -200,6 +206,14 @@ on_both_databases!(runners_racing_for_jobs_get_each_job_once, |db: Db| async mov
     let count = ids.len();
     ids.dedup();
     assert_eq!((count, ids.len()), (3, 3), "three jobs, each claimed by exactly one of eight runners");
+    let runners_seen: std::collections::BTreeSet<String> =
+        futures_util::future::join_all(runners.iter().map(|r| r.claim(0)))
+            .await
+            .into_iter()
+            .flatten()
+            .map(|j| j.id)
+            .collect();
+    assert!(runners_seen.is_empty(), "nothing left to claim");
 });
 
 on_both_databases!(tokens_only_do_what_they_are_for, |db: Db| async move {

@@ -298,3 +298,43 @@ on_both_databases!(administrators_cancel_requeue_hide_and_start_seasons, |db: Db
     assert_eq!(board(2).await["standings"][0]["technique"], "seasoned", "published on success");
     assert_eq!(board(1).await["standings"][0]["result_id"], result_id.as_str(), "the old season is kept");
 });
+
+on_both_databases!(deleting_an_account_deletes_its_projects_and_unpublished_results_only, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    let runner = FakeRunner::register(&server, "r").await;
+    let mut results = Vec::new();
+    for name in ["kept", "dropped"] {
+        new_project(&server, &ada, name).await;
+        let repo = technique_repository("box-filter-python");
+        assert!(push(repo.path(), &server.clone_url(name, &ada.token), &["FBKSD_RUN"]).0);
+        let job = runner.claim(1).await.unwrap();
+        common::upload_results(&runner, &job, 1.0).await;
+        results.push(
+            job.finish(&runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string(),
+        );
+    }
+    ada.api(Method::POST, format!("{}/api/v1/results/{}/publish", server.url, results[0])).send().await.unwrap();
+    let deleted = ada
+        .browser
+        .delete(format!("{}/api/v1/me", server.url))
+        .header("X-CSRF-Token", &ada.csrf)
+        .json(&json!({ "password": "a long enough password" }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(deleted.status(), 204);
+    let anonymous = reqwest::Client::new();
+    let get = |path: String| anonymous.get(format!("{}{path}", server.url)).send();
+    assert_eq!(get(format!("/api/v1/results/{}", results[0])).await.unwrap().status(), 200, "published stays");
+    let image = get(format!("/results/{}/files/sin-bands/4_0.png", results[0])).await.unwrap();
+    assert_eq!(image.status(), 200, "with its files");
+    let admin = server.admin().await;
+    let unpublished =
+        admin.api(Method::GET, format!("{}/api/v1/results/{}", server.url, results[1])).send().await.unwrap();
+    assert_eq!(unpublished.status(), 404, "unpublished results go with the account");
+    let project = admin.api(Method::GET, format!("{}/api/v1/projects/kept", server.url)).send().await.unwrap();
+    assert_eq!(project.status(), 404, "projects go with the account");
+    let board = json_of(get("/api/v1/leaderboard".into()).await.unwrap()).await.1;
+    assert_eq!(board["standings"][0]["technique"], "kept");
+});

@@ -102,6 +102,7 @@ pub async fn start_season(state: &AppState, note: &str) -> Result<serde_json::Va
         .bind(crate::now_ms())
         .execute(&state.pool)
         .await?;
+    crate::results::boards_changed(&state.pool).await?;
     let mut queued = Vec::new();
     let mut skipped = Vec::new();
     for set in published {

@@ -597,7 +597,7 @@ async fn board_page(
     result: Option<crate::results::ResultSet>,
 ) -> PageResult {
     let query = BoardQuery { tag: query.tag.filter(|t| !t.is_empty()), ..query };
-    let board = leaderboard::build(&state.pool, &query, result.as_ref()).await?;
+    let board = leaderboard::build(&state.pool, &state.boards, &query, result.as_ref()).await?;
     let seasons = crate::results::seasons(&state.pool).await?.into_iter().map(|(n, note, _)| (n, note)).collect();
     let title = match &result {
         Some(r) => format!("Results of {}", r.technique),
@@ -616,47 +616,47 @@ async fn board_page(
     });
     let groups = board
         .groups
-        .into_iter()
+        .iter()
         .map(|g| GroupView {
             entries: g
                 .entries
-                .into_iter()
+                .iter()
                 .map(|e| EntryView {
-                    image: e.image.map(|i| format!("/results/{}/files/{i}", e.result_id)).unwrap_or_default(),
-                    technique: e.technique,
+                    image: e.image.as_ref().map(|i| format!("/results/{}/files/{i}", e.result_id)).unwrap_or_default(),
+                    technique: e.technique.clone(),
                     highlighted: e.highlighted,
-                    status: e.status,
-                    message: e.message,
-                    values: e.values.into_iter().map(number).collect(),
+                    status: e.status.clone(),
+                    message: e.message.clone(),
+                    values: e.values.iter().copied().map(number).collect(),
                     time: format!("{:.1} ms", e.technique_ms),
                 })
                 .collect(),
-            scene: g.scene,
-            tags: g.tags,
+            scene: g.scene.clone(),
+            tags: g.tags.clone(),
             spp: g.spp,
         })
         .collect();
     let standings = board
         .standings
-        .into_iter()
+        .iter()
         .map(|s| StandingView {
-            technique: s.technique,
-            result_id: s.result_id,
+            technique: s.technique.clone(),
+            result_id: s.result_id.clone(),
             highlighted: s.highlighted,
             mean_rank: format!("{:.2}", s.mean_rank),
             missing: s.missing,
         })
         .collect();
-    let tag = board.tag.unwrap_or_default();
+    let tag = board.tag.clone().unwrap_or_default();
     let page = BoardPage {
         nav,
         title,
         result,
         seasons,
         season: board.season,
-        metrics: board.metrics,
-        sort: board.sort,
-        tags: board.tags,
+        metrics: board.metrics.clone(),
+        sort: board.sort.clone(),
+        tags: board.tags.clone(),
         tag_query: if tag.is_empty() { String::new() } else { format!("&tag={tag}") },
         tag,
         standings,

@@ -40,8 +40,8 @@ pub async fn show(
     Query(query): Query<BoardQuery>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let set = visible_set(&state, &id, user.as_ref()).await?;
-    let runs = results::runs(&state.pool, std::slice::from_ref(&set.id)).await?;
-    let board = leaderboard::build(&state.pool, &query, Some(&set)).await?;
+    let runs = results::runs(&state.pool, results::Selection::One(&set.id)).await?;
+    let board = leaderboard::build(&state.pool, &state.boards, &query, Some(&set)).await?;
     Ok(Json(json!({ "result": set, "runs": runs, "board": board })))
 }
 
@@ -49,8 +49,8 @@ pub async fn show(
 pub async fn board(
     State(state): State<AppState>,
     Query(query): Query<BoardQuery>,
-) -> Result<Json<leaderboard::Board>, ApiError> {
-    Ok(Json(leaderboard::build(&state.pool, &query, None).await?))
+) -> Result<Json<std::sync::Arc<leaderboard::Board>>, ApiError> {
+    Ok(Json(leaderboard::build(&state.pool, &state.boards, &query, None).await?))
 }
 
 /// `POST /api/v1/results/{id}/publish`: the owner publishes.

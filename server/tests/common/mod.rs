@@ -19,7 +19,8 @@ pub struct TestServer {
     pub url: String,
     pub outbox: PathBuf,
     pub admin: Option<(String, String)>,
-    _data: tempfile::TempDir,
+    config: Config,
+    _data: Option<std::sync::Arc<tempfile::TempDir>>,
 }
 
 fn postgres_admin_url() -> String {
@@ -65,14 +66,29 @@ pub async fn spawn_with(db: Db, adjust: impl FnOnce(&mut Config)) -> TestServer 
     let mut config = config;
     adjust(&mut config);
     let outbox = config.outbox_dir();
-    let app = fbksd_server::Application::build(config).await.expect("server starts");
+    let app = fbksd_server::Application::build(config.clone()).await.expect("server starts");
     let url = format!("http://127.0.0.1:{}", app.port());
     let admin = app.admin_credentials().cloned();
     tokio::spawn(app.run());
-    TestServer { url, outbox, admin, _data: data }
+    TestServer { url, outbox, admin, config, _data: Some(std::sync::Arc::new(data)) }
 }
 
 impl TestServer {
+    /// A second server instance on the same database and data directory,
+    /// as in a deployment with several instances behind a load balancer.
+    pub async fn another_instance(&self) -> TestServer {
+        let app = fbksd_server::Application::build(self.config.clone()).await.expect("second instance starts");
+        let url = format!("http://127.0.0.1:{}", app.port());
+        tokio::spawn(app.run());
+        TestServer {
+            url,
+            outbox: self.outbox.clone(),
+            admin: None,
+            config: self.config.clone(),
+            _data: self._data.clone(),
+        }
+    }
+
     /// A client with its own cookie jar (one browser).
     pub fn browser(&self) -> reqwest::Client {
         reqwest::Client::builder().cookie_store(true).build().unwrap()

@@ -1,0 +1,181 @@
+//! Load benchmark of the pages users hit most: the public leaderboard and a
+//! private results page, at 100 concurrent connections on loopback.
+//!
+//! `cargo bench -p fbksd-server --bench load [-- SECONDS [CONNECTIONS [TECHNIQUES]]]`
+//!
+//! It starts a server on SQLite (or on PostgreSQL with
+//! `FBKSD_BENCH_POSTGRES=1`, on the test server `deploy/setup.sh` starts),
+//! publishes TECHNIQUES techniques (default 20) benchmarked on 10 scenes at
+//! 4 budgets through the real API, then runs CONNECTIONS client tasks,
+//! each on its own keep-alive connection, for SECONDS per page and prints
+//! requests per second and latency percentiles.
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use common::{push, spawn_with, technique_repository, Db, FakeRunner};
+use reqwest::Method;
+use serde_json::json;
+use std::time::{Duration, Instant};
+
+/// Results of one technique: 10 scenes × 4 budgets, values scaled by `quality`.
+fn upload(quality: f64) -> serde_json::Value {
+    let scenes: Vec<String> = (0..10).map(|i| format!("scene-{i:02}")).collect();
+    let mut runs = Vec::new();
+    for (i, scene) in scenes.iter().enumerate() {
+        for spp in [4u64, 16, 64, 256] {
+            let mse = quality * (1.0 + i as f64) / spp as f64;
+            runs.push(json!({
+                "technique": "t", "scene": scene, "spp": spp, "status": "ok", "message": "", "log": "", "image": null,
+                "technique_ms": 10.0 * quality, "render_ms": 100.0, "used_samples": spp * 4096,
+                "metrics": { "MSE": mse, "SSIM": 1.0 / (1.0 + mse) }
+            }));
+        }
+    }
+    json!({
+        "runs": runs,
+        "metrics": [
+            { "acronym": "MSE", "name": "MSE", "reference": "", "lower_is_better": true, "has_error_map": false },
+            { "acronym": "SSIM", "name": "SSIM", "reference": "", "lower_is_better": false, "has_error_map": false }
+        ],
+        "scenes": scenes.iter().enumerate().map(|(i, s)| json!({
+            "name": s, "tags": if i % 2 == 0 { vec!["even"] } else { vec!["odd"] }, "scene_hash": "h", "reference_hash": "r"
+        })).collect::<Vec<_>>(),
+        "provenance": { "runner": "bench" }
+    })
+}
+
+struct Figures {
+    requests: usize,
+    errors: usize,
+    latencies: Vec<Duration>,
+    elapsed: Duration,
+}
+
+/// `connections` tasks request `url` for `seconds`, each on its own connection.
+async fn hammer(url: &str, cookie: Option<&str>, connections: usize, seconds: u64) -> Figures {
+    let deadline = Instant::now() + Duration::from_secs(seconds);
+    let start = Instant::now();
+    let tasks: Vec<_> = (0..connections)
+        .map(|_| {
+            let (url, cookie) = (url.to_string(), cookie.map(str::to_string));
+            tokio::spawn(async move {
+                let client = reqwest::Client::builder().pool_max_idle_per_host(1).build().unwrap();
+                let (mut latencies, mut errors) = (Vec::new(), 0usize);
+                while Instant::now() < deadline {
+                    let began = Instant::now();
+                    let mut request = client.get(&url);
+                    if let Some(c) = &cookie {
+                        request = request.header("Cookie", c);
+                    }
+                    match request.send().await {
+                        Ok(r) if r.status().is_success() => {
+                            let _ = r.bytes().await;
+                            latencies.push(began.elapsed());
+                        }
+                        _ => errors += 1,
+                    }
+                }
+                (latencies, errors)
+            })
+        })
+        .collect();
+    let mut figures = Figures { requests: 0, errors: 0, latencies: Vec::new(), elapsed: Duration::ZERO };
+    for task in tasks {
+        let (latencies, errors) = task.await.unwrap();
+        figures.errors += errors;
+        figures.latencies.extend(latencies);
+    }
+    figures.elapsed = start.elapsed();
+    figures.requests = figures.latencies.len();
+    figures.latencies.sort();
+    figures
+}
+
+fn percentile(sorted: &[Duration], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
+    sorted[i].as_secs_f64() * 1000.0
+}
+
+#[tokio::main(flavor = "multi_thread")]
+async fn main() {
+    let args: Vec<u64> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
+    let seconds = args.first().copied().unwrap_or(10);
+    let connections = args.get(1).copied().unwrap_or(100) as usize;
+    let techniques = args.get(2).copied().unwrap_or(20) as usize;
+    let db = if std::env::var_os("FBKSD_BENCH_POSTGRES").is_some() { Db::Postgres } else { Db::Sqlite };
+
+    let server = spawn_with(db, |c| {
+        c.max_runs_per_day = 1_000;
+        c.max_queued_jobs_per_user = 1_000;
+    })
+    .await;
+    let ada = server.user("ada@example.org").await;
+    let runner = FakeRunner::register(&server, "bench").await;
+    let mut private = String::new();
+    for t in 0..techniques {
+        let name = format!("technique-{t:02}");
+        ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
+            .json(&json!({ "name": name, "visibility": "public" }))
+            .send()
+            .await
+            .unwrap();
+        let repo = technique_repository("box-filter-python");
+        assert!(push(repo.path(), &server.clone_url(&name, &ada.token), &["FBKSD_RUN"]).0);
+        let job = runner.claim(1).await.expect("a benchmark job");
+        let status = job.send(&runner, Method::PUT, "results", upload(1.0 + t as f64 / 10.0).to_string().into()).await;
+        assert_eq!(status, 204);
+        let result =
+            job.finish(&runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string();
+        if t + 1 < techniques {
+            ada.api(Method::POST, format!("{}/api/v1/results/{result}/publish", server.url)).send().await.unwrap();
+        } else {
+            private = result;
+        }
+    }
+    // The private page needs the owner's session cookie.
+    let session = reqwest::Client::builder().cookie_store(true).build().unwrap();
+    let response = session
+        .post(format!("{}/api/v1/sessions", server.url))
+        .json(&json!({ "email": "ada@example.org", "password": "a long enough password" }))
+        .send()
+        .await
+        .unwrap();
+    let cookie = response
+        .headers()
+        .get("set-cookie")
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .unwrap()
+        .to_string();
+
+    println!(
+        "fbksd-server load: {:?}, {} published techniques × 10 scenes × 4 spp, {connections} connections, {seconds} s per page",
+        db,
+        techniques - 1
+    );
+    println!(
+        "{:<34} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
+        "page", "requests", "req/s", "p50 ms", "p99 ms", "max ms", "errors"
+    );
+    let pages = [
+        ("GET /results/ (leaderboard)", format!("{}/results/", server.url), None),
+        ("GET /results/<uuid> (private)", format!("{}/results/{private}", server.url), Some(cookie.as_str())),
+        ("GET /api/v1/leaderboard (JSON)", format!("{}/api/v1/leaderboard", server.url), None),
+    ];
+    for (label, url, cookie) in pages {
+        let f = hammer(&url, cookie, connections, seconds).await;
+        println!(
+            "{label:<34} {:>9} {:>9.0} {:>9.1} {:>9.1} {:>9.1} {:>7}",
+            f.requests,
+            f.requests as f64 / f.elapsed.as_secs_f64(),
+            percentile(&f.latencies, 0.5),
+            percentile(&f.latencies, 0.99),
+            percentile(&f.latencies, 1.0),
+            f.errors
+        );
+    }
+}
