@@ -139,6 +139,13 @@ pub struct ResultSet {
     pub hidden_reason: Option<String>,
 }
 
+impl ResultSet {
+    /// Whether everyone may see it: published and not hidden.
+    pub fn is_public(&self) -> bool {
+        self.published_at.is_some() && self.hidden_reason.is_none()
+    }
+}
+
 /// One stored run.
 #[derive(Debug, Clone, Serialize)]
 pub struct StoredRun {

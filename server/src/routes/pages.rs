@@ -11,7 +11,7 @@ use crate::accounts::{self, Email, Password, User};
 use crate::error::ApiError;
 use crate::leaderboard::{self, BoardQuery};
 use crate::pipelines::{Request, Source};
-use crate::projects::{self, ProjectName, Visibility};
+use crate::projects;
 use crate::AppState;
 use askama::Template;
 use axum::extract::{FromRequestParts, Path, Query, State};
@@ -362,12 +362,7 @@ pub async fn create_project(
     Form(form): Form<ProjectForm>,
 ) -> PageResult {
     let user = visitor.check(&form.csrf_token)?;
-    let name = ProjectName::parse(&form.name)?;
-    let project = projects::insert(&state.pool, user, &name, Visibility::parse(&form.visibility)?).await?;
-    if let Err(e) = state.git.create(&project.id).await {
-        sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
-        return Err(ApiError::internal(e).into());
-    }
+    let project = super::projects::create_with_repository(&state, user, &form.name, &form.visibility).await?;
     Ok(Redirect::to(&format!("/projects/{}", project.name)).into_response())
 }
 
@@ -435,7 +430,7 @@ pub async fn project_page(
     let results = crate::results::of_project(&state.pool, &project.id)
         .await?
         .into_iter()
-        .filter(|r| owner || (r.published_at.is_some() && r.hidden_reason.is_none()))
+        .filter(|r| owner || r.is_public())
         .map(|r| ResultRow {
             status: match (&r.hidden_reason, r.published_at) {
                 (Some(_), _) => "hidden".into(),
@@ -522,15 +517,7 @@ pub async fn cancel_job(
     Form(form): Form<CsrfForm>,
 ) -> PageResult {
     let user = visitor.check(&form.csrf_token)?;
-    let (job, project) = super::projects::readable_job(&state, &id, Some(user)).await?;
-    if !(project.writable_by(user) || user.is_admin) {
-        return Err(ApiError::forbidden(
-            "not_owner",
-            "only the project's owner or an administrator can cancel its jobs",
-        )
-        .into());
-    }
-    crate::jobs::cancel(&state.pool, &job.id, &user.email).await?;
+    super::projects::cancel_as(&state, &id, user).await?;
     Ok(Redirect::to(&format!("/jobs/{id}")).into_response())
 }
 

@@ -50,16 +50,26 @@ pub async fn create(
     caller: Caller,
     Json(body): Json<NewProject>,
 ) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
-    let name = ProjectName::parse(&body.name)?;
-    let visibility = Visibility::parse(&body.visibility)?;
-    let project = projects::insert(&state.pool, &caller.user, &name, visibility).await?;
+    let project = create_with_repository(&state, &caller.user, &body.name, &body.visibility).await?;
+    Ok((StatusCode::CREATED, Json(project_json(&state, &project))))
+}
+
+/// Creates a project row and its repository, or neither.
+pub async fn create_with_repository(
+    state: &AppState,
+    owner: &User,
+    name: &str,
+    visibility: &str,
+) -> Result<Project, ApiError> {
+    let name = ProjectName::parse(name)?;
+    let visibility = Visibility::parse(visibility)?;
+    let project = projects::insert(&state.pool, owner, &name, visibility).await?;
     if let Err(e) = state.git.create(&project.id).await {
-        // Nothing half-made: no row without its repository.
         sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
         state.git.delete(&project.id).await;
         return Err(ApiError::internal(e));
     }
-    Ok((StatusCode::CREATED, Json(project_json(&state, &project))))
+    Ok(project)
 }
 
 /// `GET /api/v1/projects`: the projects the caller can see.
@@ -84,7 +94,7 @@ pub async fn show(
     let results: Vec<_> = crate::results::of_project(&state.pool, &project.id)
         .await?
         .into_iter()
-        .filter(|r| owner || (r.published_at.is_some() && r.hidden_reason.is_none()))
+        .filter(|r| owner || r.is_public())
         .collect();
     let mut body = project_json(&state, &project);
     body["jobs"] = json!(jobs);
@@ -229,15 +239,20 @@ pub async fn cancel(
     caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Json<Job>, ApiError> {
-    let (job, project) = readable_job(&state, &id, Some(&caller.user)).await?;
-    if !(project.writable_by(&caller.user) || caller.user.is_admin) {
+    cancel_as(&state, &id, &caller.user).await?;
+    Ok(Json(crate::jobs::get(&state.pool, &id).await?.ok_or_else(|| ApiError::internal("job vanished"))?))
+}
+
+/// Cancels job `id` if `user` owns its project or is an administrator.
+pub async fn cancel_as(state: &AppState, id: &str, user: &User) -> Result<(), ApiError> {
+    let (job, project) = readable_job(state, id, Some(user)).await?;
+    if !(project.writable_by(user) || user.is_admin) {
         return Err(ApiError::forbidden(
             "not_owner",
             "only the project's owner or an administrator can cancel its jobs",
         ));
     }
-    crate::jobs::cancel(&state.pool, &job.id, &caller.user.email).await?;
-    Ok(Json(crate::jobs::get(&state.pool, &id).await?.ok_or_else(|| ApiError::internal("job vanished"))?))
+    crate::jobs::cancel(&state.pool, &job.id, &user.email).await
 }
 
 /// Who a git request authenticates as: HTTP Basic with a personal access

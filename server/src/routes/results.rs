@@ -24,8 +24,7 @@ pub async fn visible_set(state: &AppState, id: &str, user: Option<&User>) -> Res
         || ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {id} that you can see"));
     let set = results::get(&state.pool, id).await?.ok_or_else(not_found)?;
     let owner = user.is_some_and(|u| set.user_id.as_deref() == Some(u.id.as_str()) || u.is_admin);
-    let public = set.published_at.is_some() && set.hidden_reason.is_none();
-    if owner || public {
+    if owner || set.is_public() {
         Ok(set)
     } else {
         Err(not_found())
