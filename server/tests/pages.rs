@@ -181,10 +181,19 @@ on_both_databases!(a_running_jobs_log_streams_live_to_a_real_browser, |db: Db| a
     let runner = FakeRunner::register(&server, "r").await;
     let job = runner.claim(1).await.unwrap();
 
+    // A first start builds Chromium's caches (slow on a fresh machine); warm it up
+    // so the timed start below opens the page within the writer's delay.
+    let profile = tempfile::tempdir().unwrap();
+    let warm_up = tokio::process::Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--dump-dom", "about:blank"])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .output()
+        .await;
+    assert!(warm_up.is_ok_and(|o| o.status.success()), "Chromium starts");
+
     // The browser opens the page while the job runs; the runner writes
     // after the page has loaded, then ends the job.
     let url = format!("{}/jobs/{}", server.url, job.id);
-    let profile = tempfile::tempdir().unwrap();
     let browser = tokio::process::Command::new(chromium)
         .args(["--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=8000", "--dump-dom"])
         .arg(format!("--user-data-dir={}", profile.path().display()))
