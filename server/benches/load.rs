@@ -118,11 +118,7 @@ async fn main() {
     let mut private = String::new();
     for t in 0..techniques {
         let name = format!("technique-{t:02}");
-        ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
-            .json(&json!({ "name": name, "visibility": "public" }))
-            .send()
-            .await
-            .unwrap();
+        server.create_project(&ada, &name, "public").await;
         let repo = technique_repository("box-filter-python");
         assert!(push(repo.path(), &server.clone_url(&name, &ada.token), &["FBKSD_RUN"]).0);
         let job = runner.claim(1).await.expect("a benchmark job");

@@ -28,6 +28,13 @@ pub struct AppState {
     pub boards: crate::leaderboard::BoardCache,
 }
 
+impl AppState {
+    /// The URL git clones a project from.
+    pub fn clone_url(&self, project: &str) -> String {
+        format!("{}/git/{project}.git", self.public_url)
+    }
+}
+
 /// A server ready to run: its listener is bound.
 pub struct Application {
     listener: TcpListener,

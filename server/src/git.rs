@@ -249,9 +249,10 @@ impl GitHost {
                 )
             }
         };
-        let record = tempfile::NamedTempFile::new_in(&self.root);
-        let Ok(record) = record else {
-            return plain(StatusCode::INTERNAL_SERVER_ERROR, "cannot create a temporary file\n".into());
+        // Only a push has hooks to report through.
+        let record = match is_push.then(|| tempfile::NamedTempFile::new_in(&self.root)).transpose() {
+            Ok(r) => r,
+            Err(_) => return plain(StatusCode::INTERNAL_SERVER_ERROR, "cannot create a temporary file\n".into()),
         };
         let header = |name: &str| headers.get(name).and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
         let mut command = Command::new("git");
@@ -270,11 +271,13 @@ impl GitHost {
             .env("GIT_PROTOCOL", header("git-protocol"))
             .env("REMOTE_USER", user)
             .env("REMOTE_ADDR", "127.0.0.1")
-            .env("FBKSD_PUSH_RECORD", record.path())
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .kill_on_drop(true);
+        if let Some(record) = &record {
+            command.env("FBKSD_PUSH_RECORD", record.path());
+        }
         let mut child = match command.spawn() {
             Ok(c) => c,
             Err(e) => return plain(StatusCode::INTERNAL_SERVER_ERROR, format!("cannot run git http-backend: {e}\n")),
@@ -342,9 +345,10 @@ impl GitHost {
             tracing::debug!("git http-backend (push): {}", errors.trim());
         }
         let push = match exit {
-            Ok(s) if s.success() => {
-                std::fs::read_to_string(record.path()).ok().filter(|t| !t.is_empty()).map(|t| PushRecord::parse(&t))
-            }
+            Ok(s) if s.success() => record
+                .and_then(|r| std::fs::read_to_string(r.path()).ok())
+                .filter(|t| !t.is_empty())
+                .map(|t| PushRecord::parse(&t)),
             _ => None,
         };
         let response = response.body(Body::from(output)).unwrap_or_else(|_| StatusCode::BAD_GATEWAY.into_response());

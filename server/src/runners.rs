@@ -30,6 +30,15 @@ pub struct Runner {
     pub running_jobs: i64,
 }
 
+impl Runner {
+    /// Whether the runner reported lately: a runner not heard of for two
+    /// leases (or two long polls, if longer) is presumed gone.
+    pub fn healthy(&self, config: &crate::config::Config, now_ms: i64) -> bool {
+        let silent_after_ms = 2 * config.lease_seconds.max(config.long_poll_seconds) as i64 * 1000;
+        now_ms - self.last_seen_at <= silent_after_ms
+    }
+}
+
 /// Sets the registration token: `configured` if given, else a new random
 /// one if none exists yet. Returns the token when it was generated now
 /// (to print once).

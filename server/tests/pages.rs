@@ -101,11 +101,7 @@ on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its
     // Bob's technique is published; Ada's is not yet.
     let mut results = Vec::new();
     for (user, name, quality) in [(&bob, "bob-filter", 2.0), (&ada, "ada-filter", 1.0)] {
-        user.api(Method::POST, format!("{}/api/v1/projects", server.url))
-            .json(&json!({ "name": name, "visibility": "public" }))
-            .send()
-            .await
-            .unwrap();
+        server.create_project(user, name, "public").await;
         let repo = technique_repository("box-filter-python");
         assert!(push(repo.path(), &server.clone_url(name, &user.token), &["FBKSD_RUN"]).0);
         let job = runner.claim(1).await.unwrap();
@@ -171,11 +167,7 @@ on_both_databases!(a_running_jobs_log_streams_live_to_a_real_browser, |db: Db| a
     };
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;
-    ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
-        .json(&json!({ "name": "live", "visibility": "public" }))
-        .send()
-        .await
-        .unwrap();
+    server.create_project(&ada, "live", "public").await;
     let repo = technique_repository("box-filter-python");
     assert!(push(repo.path(), &server.clone_url("live", &ada.token), &[]).0);
     let runner = FakeRunner::register(&server, "r").await;

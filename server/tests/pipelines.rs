@@ -5,28 +5,9 @@
 
 mod common;
 
-use common::{push, spawn, spawn_with, technique_repository, Db, FakeRunner};
+use common::{json_of, push, spawn, spawn_with, technique_repository, Db, FakeRunner};
 use reqwest::Method;
 use serde_json::{json, Value};
-
-async fn json_of(response: reqwest::Response) -> (u16, Value) {
-    let status = response.status().as_u16();
-    (status, response.json().await.unwrap_or_default())
-}
-
-/// Creates a project; its JSON.
-async fn create_project(server: &common::TestServer, user: &common::TestUser, name: &str, visibility: &str) -> Value {
-    let (status, body) = json_of(
-        user.api(Method::POST, format!("{}/api/v1/projects", server.url))
-            .json(&json!({ "name": name, "visibility": visibility }))
-            .send()
-            .await
-            .unwrap(),
-    )
-    .await;
-    assert_eq!(status, 201, "{body}");
-    body
-}
 
 async fn project_jobs(server: &common::TestServer, user: &common::TestUser, name: &str) -> Vec<Value> {
     let (status, body) =
@@ -45,7 +26,7 @@ async fn log_text(server: &common::TestServer, user: &common::TestUser, job: &st
 on_both_databases!(push_build_run_publish_and_the_leaderboard, |db: Db| async move {
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;
-    let project = create_project(&server, &ada, "box-filter-cpp", "private").await;
+    let project = server.create_project(&ada, "box-filter-cpp", "private").await;
     assert!(project["clone_url"].as_str().unwrap().ends_with("/git/box-filter-cpp.git"));
 
     // A push with real git starts a build job.
@@ -163,7 +144,7 @@ on_both_databases!(push_build_run_publish_and_the_leaderboard, |db: Db| async mo
 on_both_databases!(a_lost_lease_queues_the_job_again_for_another_runner, |db: Db| async move {
     let server = spawn_with(db, |c| c.lease_seconds = 1).await;
     let ada = server.user("ada@example.org").await;
-    create_project(&server, &ada, "lease", "private").await;
+    server.create_project(&ada, "lease", "private").await;
     let repo = technique_repository("box-filter-python");
     assert!(push(repo.path(), &server.clone_url("lease", &ada.token), &[]).0);
 
@@ -184,7 +165,7 @@ on_both_databases!(a_lost_lease_queues_the_job_again_for_another_runner, |db: Db
 on_both_databases!(runners_racing_for_jobs_get_each_job_once, |db: Db| async move {
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;
-    create_project(&server, &ada, "race", "private").await;
+    server.create_project(&ada, "race", "private").await;
     let repo = technique_repository("box-filter-python");
     for i in 0..3 {
         common::commit_all(repo.path(), &format!("commit {i}"));
@@ -219,7 +200,7 @@ on_both_databases!(runners_racing_for_jobs_get_each_job_once, |db: Db| async mov
 on_both_databases!(tokens_only_do_what_they_are_for, |db: Db| async move {
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;
-    create_project(&server, &ada, "tokens", "public").await;
+    server.create_project(&ada, "tokens", "public").await;
     let repo = technique_repository("box-filter-python");
     assert!(push(repo.path(), &server.clone_url("tokens", &ada.token), &[]).0);
     common::commit_all(repo.path(), "second");

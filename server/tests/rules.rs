@@ -3,24 +3,9 @@
 
 mod common;
 
-use common::{push, spawn, spawn_with, technique_repository, Db, FakeRunner};
+use common::{json_of, push, spawn, spawn_with, technique_repository, Db, FakeRunner};
 use reqwest::Method;
 use serde_json::{json, Value};
-
-async fn json_of(response: reqwest::Response) -> (u16, Value) {
-    let status = response.status().as_u16();
-    (status, response.json().await.unwrap_or_default())
-}
-
-async fn new_project(server: &common::TestServer, user: &common::TestUser, name: &str) {
-    let response = user
-        .api(Method::POST, format!("{}/api/v1/projects", server.url))
-        .json(&json!({ "name": name, "visibility": "private" }))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(response.status(), 201);
-}
 
 async fn jobs_of(server: &common::TestServer, user: &common::TestUser, name: &str) -> Vec<Value> {
     let body =
@@ -47,7 +32,7 @@ async fn run_pipeline(
 on_both_databases!(a_broken_repository_fails_its_build_at_once_and_mails_the_author, |db: Db| async move {
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;
-    new_project(&server, &ada, "broken").await;
+    server.create_project(&ada, "broken", "private").await;
     let repo = technique_repository("box-filter-cpp");
     std::fs::write(repo.path().join("info.json"), r#"{"short_name": "broken", "technique_type": "filter"}"#).unwrap();
     common::commit_all(repo.path(), "typo");
@@ -72,7 +57,7 @@ on_both_databases!(a_broken_repository_fails_its_build_at_once_and_mails_the_aut
 on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is_written, |db: Db| async move {
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;
-    new_project(&server, &ada, "vars").await;
+    server.create_project(&ada, "vars", "private").await;
     let repo = technique_repository("box-filter-python");
     let url = server.clone_url("vars", &ada.token);
 
@@ -128,7 +113,7 @@ on_both_databases!(oversized_pushes_and_uploads_are_refused, |db: Db| async move
     })
     .await;
     let ada = server.user("ada@example.org").await;
-    new_project(&server, &ada, "big").await;
+    server.create_project(&ada, "big", "private").await;
     let repo = technique_repository("box-filter-python");
     // Incompressible bytes, well over the limit.
     let mut x = 0x9e37_79b9_7f4a_7c15u64;
@@ -188,7 +173,7 @@ on_both_databases!(quotas_bound_queued_jobs_and_daily_runs, |db: Db| async move 
     })
     .await;
     let ada = server.user("ada@example.org").await;
-    new_project(&server, &ada, "quota").await;
+    server.create_project(&ada, "quota", "private").await;
     let repo = technique_repository("box-filter-python");
     assert!(push(repo.path(), &server.clone_url("quota", &ada.token), &[]).0, "one build queued");
     let run = || run_pipeline(&server, &ada, "quota", json!({ "FBKSD_RUN": "1" }));
@@ -229,7 +214,7 @@ on_both_databases!(administrators_cancel_requeue_hide_and_start_seasons, |db: Db
     let server = spawn(db).await;
     let admin = server.admin().await;
     let ada = server.user("ada@example.org").await;
-    new_project(&server, &ada, "seasoned").await;
+    server.create_project(&ada, "seasoned", "private").await;
     let repo = technique_repository("box-filter-python");
     assert!(push(repo.path(), &server.clone_url("seasoned", &ada.token), &["FBKSD_RUN"]).0);
     let runner = FakeRunner::register(&server, "r").await;
@@ -305,7 +290,7 @@ on_both_databases!(deleting_an_account_deletes_its_projects_and_unpublished_resu
     let runner = FakeRunner::register(&server, "r").await;
     let mut results = Vec::new();
     for name in ["kept", "dropped"] {
-        new_project(&server, &ada, name).await;
+        server.create_project(&ada, name, "private").await;
         let repo = technique_repository("box-filter-python");
         assert!(push(repo.path(), &server.clone_url(name, &ada.token), &["FBKSD_RUN"]).0);
         let job = runner.claim(1).await.unwrap();

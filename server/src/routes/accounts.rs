@@ -1,6 +1,6 @@
 //! Registration, e-mail verification, logging in and out.
 
-use super::{Caller, SessionUser, SESSION_COOKIE};
+use super::{Caller, SessionUser};
 use crate::accounts::{self, Email, Password};
 use crate::error::ApiError;
 use crate::AppState;
@@ -74,12 +74,7 @@ pub async fn verify_link(State(state): State<AppState>, Query(body): Query<Token
 pub async fn log_in(State(state): State<AppState>, Json(body): Json<Credentials>) -> Result<Response, ApiError> {
     let user = accounts::authenticate(&state.pool, &body.email, &body.password).await?;
     let session = accounts::open_session(&state.pool, &user.id, state.config.session_hours).await?;
-    let secure = if state.public_url.starts_with("https://") { "; Secure" } else { "" };
-    let cookie = format!(
-        "{SESSION_COOKIE}={}; Path=/; HttpOnly; SameSite=Lax; Max-Age={}{secure}",
-        session.token,
-        state.config.session_hours * 3600
-    );
+    let cookie = super::session_cookie(&state, &session.token);
     Ok(([(header::SET_COOKIE, cookie)], Json(json!({ "user": user, "csrf_token": session.csrf_token })))
         .into_response())
 }
@@ -87,8 +82,7 @@ pub async fn log_in(State(state): State<AppState>, Json(body): Json<Credentials>
 /// `DELETE /api/v1/sessions`: logs out (CSRF-checked).
 pub async fn log_out(State(state): State<AppState>, session: SessionUser) -> Result<Response, ApiError> {
     accounts::close_session(&state.pool, &session.token).await?;
-    let cookie = format!("{SESSION_COOKIE}=; Path=/; HttpOnly; SameSite=Lax; Max-Age=0");
-    Ok(([(header::SET_COOKIE, cookie)], StatusCode::NO_CONTENT).into_response())
+    Ok(([(header::SET_COOKIE, super::ENDED_SESSION_COOKIE)], StatusCode::NO_CONTENT).into_response())
 }
 
 /// `GET /api/v1/me`: who is calling.

@@ -33,13 +33,11 @@ pub async fn requeue(
 /// `GET /api/v1/admin/runners`: runners and their health.
 pub async fn runners(State(state): State<AppState>, Admin(_): Admin) -> Result<Json<serde_json::Value>, ApiError> {
     let now = crate::now_ms();
-    let lease_ms = state.config.lease_seconds as i64 * 1000;
     let list: Vec<_> = crate::runners::all(&state.pool)
         .await?
         .into_iter()
         .map(|r| {
-            // A runner that has not been heard of for two leases is presumed gone.
-            let healthy = now - r.last_seen_at <= 2 * lease_ms.max(state.config.long_poll_seconds as i64 * 1000);
+            let healthy = r.healthy(&state.config, now);
             json!({ "runner": r, "healthy": healthy, "seconds_since_seen": (now - r.last_seen_at) / 1000 })
         })
         .collect();

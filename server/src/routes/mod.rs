@@ -28,6 +28,16 @@ use axum::Router;
 /// Name of the session cookie.
 pub const SESSION_COOKIE: &str = "fbksd_session";
 
+/// A `Set-Cookie` value that ends the session cookie.
+const ENDED_SESSION_COOKIE: &str = "fbksd_session=; Path=/; HttpOnly; SameSite=Lax; Max-Age=0";
+
+/// The `Set-Cookie` value of a new session (Secure when the server is reached over HTTPS).
+fn session_cookie(state: &AppState, token: &str) -> String {
+    let secure = if state.public_url.starts_with("https://") { "; Secure" } else { "" };
+    let max_age = state.config.session_hours * 3600;
+    format!("{SESSION_COOKIE}={token}; Path=/; HttpOnly; SameSite=Lax; Max-Age={max_age}{secure}")
+}
+
 /// The router of the whole server.
 pub fn router(state: AppState) -> Router {
     Router::new()

@@ -210,12 +210,7 @@ pub async fn login(
         Err(e) => return Ok(credentials_page(false, &form.email, &e.message, e.status)),
     };
     let session = accounts::open_session(&state.pool, &user.id, state.config.session_hours).await?;
-    let secure = if state.public_url.starts_with("https://") { "; Secure" } else { "" };
-    let cookie = format!(
-        "{SESSION_COOKIE}={}; Path=/; HttpOnly; SameSite=Lax; Max-Age={}{secure}",
-        session.token,
-        state.config.session_hours * 3600
-    );
+    let cookie = super::session_cookie(&state, &session.token);
     Ok(([(header::SET_COOKIE, cookie)], Redirect::to("/projects")).into_response())
 }
 
@@ -255,8 +250,7 @@ pub async fn logout(
     if let Some(token) = cookie(&headers, SESSION_COOKIE) {
         accounts::close_session(&state.pool, token).await?;
     }
-    let cookie = format!("{SESSION_COOKIE}=; Path=/; HttpOnly; SameSite=Lax; Max-Age=0");
-    Ok(([(header::SET_COOKIE, cookie)], Redirect::to("/results/")).into_response())
+    Ok(([(header::SET_COOKIE, super::ENDED_SESSION_COOKIE)], Redirect::to("/results/")).into_response())
 }
 
 // ---------------------------------------------------------------- tokens
@@ -449,7 +443,7 @@ pub async fn project_page(
         technique_type: info.as_ref().map(|i| format!("{:?}", i.technique_type).to_lowercase()).unwrap_or_default(),
         comment: info.as_ref().map(|i| i.comment.clone()).unwrap_or_default(),
         citation: info.as_ref().map(|i| i.citation.clone()).unwrap_or_default(),
-        clone_url: format!("{}/git/{}.git", state.public_url, project.name),
+        clone_url: state.clone_url(&project.name),
         visibility: project.visibility.as_str(),
         name: project.name,
         owner,
@@ -724,12 +718,11 @@ fn admin_of(nav: &Nav) -> Result<&User, PageError> {
 pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) -> PageResult {
     admin_of(&nav)?;
     let now = crate::now_ms();
-    let silent_after = 2 * (state.config.lease_seconds.max(state.config.long_poll_seconds) as i64) * 1000;
     let runners = crate::runners::all(&state.pool)
         .await?
         .into_iter()
         .map(|r| RunnerRow {
-            healthy: now - r.last_seen_at <= silent_after,
+            healthy: r.healthy(&state.config, now),
             name: r.name,
             machine: r.machine.to_string(),
             last_seen: when(r.last_seen_at),

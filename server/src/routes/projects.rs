@@ -40,7 +40,7 @@ fn project_json(state: &AppState, project: &Project) -> serde_json::Value {
         "visibility": project.visibility,
         "owner_id": project.owner_id,
         "created_at": project.created_at,
-        "clone_url": format!("{}/git/{}.git", state.public_url, project.name),
+        "clone_url": state.clone_url(&project.name),
     })
 }
 

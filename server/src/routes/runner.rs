@@ -64,14 +64,14 @@ pub async fn claim(
     let deadline = Instant::now() + Duration::from_secs(wait);
     let lease_ms = state.config.lease_seconds as i64 * 1000;
     loop {
-        crate::jobs::expire_leases(&state.pool).await?;
+        // Expired leases are queued again by the server's sweeper (every second).
         let notified = state.job_queued.notified();
         if let Some(claimed) = crate::jobs::claim(&state.pool, state.postgres, &runner_id, lease_ms).await? {
             let job = &claimed.job;
             return Ok(Json(json!({
                 "job": job,
                 "token": claimed.token,
-                "repository": format!("{}/git/{}.git", state.public_url, job.project),
+                "repository": state.clone_url(&job.project),
                 "commit": job.commit_sha,
                 "lease_seconds": state.config.lease_seconds,
                 "results_url": state.public_url,

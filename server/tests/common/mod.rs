@@ -185,6 +185,27 @@ impl TestServer {
     }
 }
 
+impl TestServer {
+    /// Creates a project as `user`; its JSON.
+    pub async fn create_project(&self, user: &TestUser, name: &str, visibility: &str) -> serde_json::Value {
+        let response = user
+            .api(reqwest::Method::POST, format!("{}/api/v1/projects", self.url))
+            .json(&serde_json::json!({ "name": name, "visibility": visibility }))
+            .send()
+            .await
+            .unwrap();
+        let (status, body) = json_of(response).await;
+        assert_eq!(status, 201, "{body}");
+        body
+    }
+}
+
+/// An answer's status and JSON body (null if it has none).
+pub async fn json_of(response: reqwest::Response) -> (u16, serde_json::Value) {
+    let status = response.status().as_u16();
+    (status, response.json().await.unwrap_or_default())
+}
+
 impl TestUser {
     /// An API request with the user's access token.
     pub fn api(&self, method: reqwest::Method, url: String) -> reqwest::RequestBuilder {
