@@ -45,37 +45,8 @@ impl JobKind {
     }
 }
 
-/// Why a job failed: each comes with a message the user can act on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FailureReason {
-    /// The repository failed its checks or did not build.
-    BuildFailed,
-    /// A build or run exceeded its wall-time limit.
-    Timeout,
-    /// A container hit its memory limit.
-    OutOfMemory,
-    /// The technique died.
-    Crashed,
-    /// The technique's output was wrong (size, NaN, …).
-    InvalidOutput,
-    /// Not the user's fault: the runner, Docker or the server failed.
-    InfrastructureError,
-}
-
-impl FailureReason {
-    /// The stored name.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            FailureReason::BuildFailed => "build_failed",
-            FailureReason::Timeout => "timeout",
-            FailureReason::OutOfMemory => "out_of_memory",
-            FailureReason::Crashed => "crashed",
-            FailureReason::InvalidOutput => "invalid_output",
-            FailureReason::InfrastructureError => "infrastructure_error",
-        }
-    }
-}
+/// Why a job failed (shared with the runner, which decides it).
+pub use fbksd_manager::FailureReason;
 
 /// A job as pages and the API show it.
 #[derive(Debug, Clone, serde::Serialize)]

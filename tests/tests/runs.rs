@@ -27,6 +27,7 @@ fn bench(dir: &Path, techniques: Vec<TechniqueSpec>, spps: &[u64], flags: &[&str
         }],
         results: dir.join("results"),
         limits: limits(limit_s),
+        launcher: std::sync::Arc::new(fbksd_manager::LocalLauncher),
     }
     .run(|_| {})
     .unwrap()

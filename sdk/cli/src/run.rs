@@ -92,7 +92,13 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         scenes.push(SceneSpec { name, renderer_argv, spps });
     }
     let limits = Limits { time_limit: (!args.time_limit.is_zero()).then_some(args.time_limit), ..Limits::default() };
-    let benchmark = Benchmark { techniques, scenes, results: args.results.clone(), limits };
+    let benchmark = Benchmark {
+        techniques,
+        scenes,
+        results: args.results.clone(),
+        limits,
+        launcher: std::sync::Arc::new(fbksd_manager::LocalLauncher),
+    };
     let live = std::io::stderr().is_terminal();
     let records = benchmark.run(|p| report(p, live))?;
     print_summary(&records);

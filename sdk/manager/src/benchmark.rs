@@ -4,11 +4,13 @@
 //! (it is restarted only after a run left it broken or mid-request); the
 //! technique starts once per (scene, budget), as in the original FBKSD.
 
+use crate::process::Launcher;
 use crate::record::{RunRecord, RunStatus};
 use crate::results::{path_safe_name, write_exr, write_json_atomically, ResultsDir};
 use crate::scene::{Limits, SceneRunner, TechniqueLaunch};
 use std::io;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// A technique to run: a name and a command.
 #[derive(Debug, Clone)]
@@ -64,6 +66,8 @@ pub struct Benchmark {
     pub results: PathBuf,
     /// Limits of every run.
     pub limits: Limits,
+    /// Starts renderers and techniques ([`crate::LocalLauncher`] for local runs).
+    pub launcher: Arc<dyn Launcher>,
 }
 
 impl Benchmark {
@@ -74,7 +78,8 @@ impl Benchmark {
         for scene in &self.scenes {
             let scene_name = path_safe_name(&scene.name);
             let renderer_log = results.renderer_log(&scene_name)?;
-            let mut runner = SceneRunner::new(scene.renderer_argv.clone(), Some(renderer_log), self.limits.clone())?;
+            let mut runner = SceneRunner::new(scene.renderer_argv.clone(), Some(renderer_log), self.limits.clone())?
+                .with_launcher(self.launcher.clone())?;
             for technique in &self.techniques {
                 let technique_name = path_safe_name(&technique.name);
                 let dir = results.run_dir(&technique_name, &scene_name)?;

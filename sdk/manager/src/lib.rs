@@ -25,6 +25,7 @@
 //!     }],
 //!     results: "results".into(),
 //!     limits: Limits::default(),
+//!     launcher: std::sync::Arc::new(fbksd_manager::LocalLauncher),
 //! };
 //! let records = bench.run(|_| {}).unwrap();
 //! ```
@@ -40,7 +41,8 @@ pub mod scenes;
 pub mod technique;
 
 pub use benchmark::{Benchmark, Progress, SceneSpec, TechniqueSpec};
-pub use record::{RunRecord, RunStatus, Times};
+pub use process::{LaunchSpec, Launcher, LocalLauncher, ProcessRole, Running};
+pub use record::{FailureReason, RunRecord, RunStatus, Times};
 pub use scene::{Limits, RunOutcome, SceneRunner, TechniqueLaunch};
 
 use std::time::Duration;

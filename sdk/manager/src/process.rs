@@ -3,6 +3,11 @@
 //! reaped with `wait4` so that its CPU time and peak memory are measured by
 //! the kernel, not reported by itself.
 //!
+//! How a run's processes come to be is a [`Launcher`]'s business: the
+//! [`LocalLauncher`] starts them here as [`Supervised`] children; the CI
+//! runner starts each in its own sandboxed container, sharing only the
+//! rendezvous directory.
+//!
 //! Note: the parent-death signal fires when the *thread* that started the
 //! child exits, so children are started from threads that outlive them
 //! (the caller of `SceneRunner::run`).
@@ -26,12 +31,89 @@ pub struct ExitInfo {
     pub peak_rss: u64,
     /// When the process was reaped.
     pub at: Instant,
+    /// Whether it was killed for going over its memory limit (a container's
+    /// limit; a local process is never marked).
+    pub out_of_memory: bool,
 }
 
 impl ExitInfo {
     /// "exit code 3", "killed by signal 9 (SIGKILL)", ….
     pub fn describe(&self) -> String {
+        if self.out_of_memory {
+            return "killed by the kernel: out of memory".into();
+        }
         describe_status(self.status)
+    }
+}
+
+/// Which process of a run is to be started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProcessRole {
+    /// The scene's renderer (trusted).
+    Renderer,
+    /// The technique under test (untrusted).
+    Technique,
+}
+
+/// What a [`Launcher`] is asked to start.
+#[derive(Debug, Clone, Copy)]
+pub struct LaunchSpec<'a> {
+    /// Renderer or technique.
+    pub role: ProcessRole,
+    /// The command.
+    pub argv: &'a [String],
+    /// The run's rendezvous directory, to be named by `FBKSD_RENDEZVOUS`.
+    pub rendezvous: &'a Path,
+    /// The technique's session token, to be passed as `FBKSD_SESSION`.
+    pub session_token: Option<&'a str>,
+    /// Where its output goes (inherited when `None`).
+    pub log: Option<&'a Path>,
+}
+
+/// A started process: the manager only ever kills it; its end arrives
+/// through the `on_exit` callback given to [`Launcher::launch`].
+pub trait Running: Send {
+    /// Kills it and everything it started (idempotent).
+    fn kill(&self);
+
+    /// When its program started: the technique's clock starts here, so a
+    /// container's creation is not counted as the technique's time.
+    fn started_at(&self) -> Instant;
+}
+
+/// Starts a run's processes.
+pub trait Launcher: std::fmt::Debug + Send + Sync {
+    /// Starts `spec` and reports its end to `on_exit`, exactly once.
+    fn launch(&self, spec: &LaunchSpec<'_>, on_exit: Box<dyn FnOnce(ExitInfo) + Send>) -> io::Result<Box<dyn Running>>;
+
+    /// Whether the processes run as another user (in containers), so the
+    /// rendezvous directory's files must be open to them.
+    fn shares_files_with_other_users(&self) -> bool {
+        false
+    }
+}
+
+/// Starts processes on this machine, as children of the manager.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LocalLauncher;
+
+impl Launcher for LocalLauncher {
+    fn launch(&self, spec: &LaunchSpec<'_>, on_exit: Box<dyn FnOnce(ExitInfo) + Send>) -> io::Result<Box<dyn Running>> {
+        let mut env = vec![(fbksd_core::rendezvous::ENV_VAR, spec.rendezvous.as_os_str())];
+        if let Some(token) = spec.session_token {
+            env.push((fbksd_core::rendezvous::SESSION_ENV_VAR, std::ffi::OsStr::new(token)));
+        }
+        Ok(Box::new(Supervised::spawn(spec.argv, &env, spec.log, on_exit)?))
+    }
+}
+
+impl Running for Supervised {
+    fn kill(&self) {
+        Supervised::kill(self)
+    }
+
+    fn started_at(&self) -> Instant {
+        self.started
     }
 }
 
@@ -140,6 +222,7 @@ fn wait4(pid: i32) -> ExitInfo {
                 cpu_time: Duration::ZERO,
                 peak_rss: 0,
                 at: Instant::now(),
+                out_of_memory: false,
             };
         }
     }
@@ -149,6 +232,7 @@ fn wait4(pid: i32) -> ExitInfo {
         cpu_time: tv(usage.ru_utime) + tv(usage.ru_stime),
         peak_rss: usage.ru_maxrss as u64 * 1024,
         at: Instant::now(),
+        out_of_memory: false,
     }
 }
 

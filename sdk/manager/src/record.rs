@@ -15,6 +15,8 @@ pub enum RunStatus {
     Timeout,
     /// The technique died (signal or non-zero exit) before sending a result.
     Crashed,
+    /// The technique was killed for going over its memory limit (sandboxed runs).
+    OutOfMemory,
     /// The technique exited cleanly without sending a result.
     NoResult,
     /// The result has the wrong size or holds NaN/Inf values.
@@ -37,12 +39,62 @@ impl RunStatus {
             RunStatus::OverBudget => "over_budget",
             RunStatus::Timeout => "timeout",
             RunStatus::Crashed => "crashed",
+            RunStatus::OutOfMemory => "out_of_memory",
             RunStatus::NoResult => "no_result",
             RunStatus::InvalidOutput => "invalid_output",
             RunStatus::InvalidLayout => "invalid_layout",
             RunStatus::ProtocolError => "protocol_error",
             RunStatus::RendererFailed => "renderer_failed",
             RunStatus::LaunchFailed => "launch_failed",
+        }
+    }
+}
+
+/// Why a build or benchmark job failed, as the service reports it: the
+/// server stores it, the runner decides it. Each comes with a message the
+/// author can act on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FailureReason {
+    /// The repository failed its checks or did not build.
+    BuildFailed,
+    /// A build or run exceeded its wall-time limit.
+    Timeout,
+    /// A container hit its memory limit.
+    OutOfMemory,
+    /// The technique died.
+    Crashed,
+    /// The technique's output was wrong (size, NaN, layout, budget, protocol).
+    InvalidOutput,
+    /// Not the author's fault: the runner, Docker or the server failed.
+    InfrastructureError,
+}
+
+impl FailureReason {
+    /// The name as written in the API and the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FailureReason::BuildFailed => "build_failed",
+            FailureReason::Timeout => "timeout",
+            FailureReason::OutOfMemory => "out_of_memory",
+            FailureReason::Crashed => "crashed",
+            FailureReason::InvalidOutput => "invalid_output",
+            FailureReason::InfrastructureError => "infrastructure_error",
+        }
+    }
+}
+
+impl RunStatus {
+    /// The job failure reason a run that ended with this status stands for.
+    pub fn failure_reason(self) -> FailureReason {
+        match self {
+            RunStatus::Timeout => FailureReason::Timeout,
+            RunStatus::OutOfMemory => FailureReason::OutOfMemory,
+            RunStatus::Crashed | RunStatus::NoResult | RunStatus::RendererFailed => FailureReason::Crashed,
+            RunStatus::InvalidOutput | RunStatus::InvalidLayout | RunStatus::OverBudget | RunStatus::ProtocolError => {
+                FailureReason::InvalidOutput
+            }
+            RunStatus::LaunchFailed | RunStatus::Ok => FailureReason::InfrastructureError,
         }
     }
 }
@@ -118,4 +170,20 @@ pub struct RunRecord {
     pub image: Option<String>,
     /// The technique's output, relative to the log's directory.
     pub technique_log: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_run_status_stands_for_a_failure_reason() {
+        assert_eq!(RunStatus::Timeout.failure_reason(), FailureReason::Timeout);
+        assert_eq!(RunStatus::OutOfMemory.failure_reason(), FailureReason::OutOfMemory);
+        assert_eq!(RunStatus::Crashed.failure_reason(), FailureReason::Crashed);
+        assert_eq!(RunStatus::InvalidOutput.failure_reason(), FailureReason::InvalidOutput);
+        assert_eq!(RunStatus::OverBudget.failure_reason(), FailureReason::InvalidOutput);
+        assert_eq!(RunStatus::LaunchFailed.failure_reason(), FailureReason::InfrastructureError);
+        assert_eq!(serde_json::to_value(FailureReason::OutOfMemory).unwrap(), "out_of_memory");
+    }
 }

@@ -9,7 +9,7 @@
 
 mod session;
 
-use crate::process::{log_tail, report_to, ExitInfo, Supervised};
+use crate::process::{log_tail, report_to, ExitInfo, LaunchSpec, Launcher, LocalLauncher, ProcessRole, Running};
 use crate::record::{RunStatus, Times};
 use fbksd_core::protocol::{
     read_frame, write_frame, ErrorKind, FromRenderer, FromTechnique, Hello, Role, ToRenderer, ToTechnique,
@@ -24,6 +24,7 @@ use std::os::unix::fs::PermissionsExt;
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Default size of one ring slot. Large enough that a hand-off costs far
@@ -44,6 +45,8 @@ pub struct Limits {
     pub renderer_start: Duration,
     /// Bytes per ring slot (at least one pixel's samples at the full budget).
     pub slot_bytes: u64,
+    /// Where rendezvous directories go; `None` for [`rendezvous::default_parent`].
+    pub rendezvous_parent: Option<PathBuf>,
 }
 
 impl Default for Limits {
@@ -52,6 +55,7 @@ impl Default for Limits {
             time_limit: Some(crate::DEFAULT_TIME_LIMIT),
             renderer_start: Duration::from_secs(300),
             slot_bytes: DEFAULT_SLOT_BYTES,
+            rendezvous_parent: None,
         }
     }
 }
@@ -134,7 +138,7 @@ pub(crate) enum Event {
 }
 
 pub(crate) struct RendererConn {
-    process: Supervised,
+    process: Box<dyn Running>,
     writer: UnixStream,
     generation: u64,
     tile_size: u32,
@@ -151,6 +155,7 @@ impl RendererConn {
 /// A scene's rendezvous directory and renderer, reused across runs.
 pub struct SceneRunner {
     dir: tempfile::TempDir,
+    launcher: Arc<dyn Launcher>,
     renderer_argv: Vec<String>,
     renderer_log: Option<PathBuf>,
     limits: Limits,
@@ -168,7 +173,8 @@ impl SceneRunner {
     /// argument is normally the scene file); the renderer starts on the
     /// first run. Its output goes to `renderer_log`, or is inherited when `None`.
     pub fn new(renderer_argv: Vec<String>, renderer_log: Option<PathBuf>, limits: Limits) -> std::io::Result<Self> {
-        let dir = tempfile::Builder::new().prefix("fbksd-run-").tempdir_in(rendezvous::default_parent())?;
+        let parent = limits.rendezvous_parent.clone().unwrap_or_else(rendezvous::default_parent);
+        let dir = tempfile::Builder::new().prefix("fbksd-run-").tempdir_in(parent)?;
         // Containers running as another user share this directory; the
         // directory's own name is unguessable and its parent is not listed to them.
         std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o700))?;
@@ -178,6 +184,7 @@ impl SceneRunner {
         std::thread::Builder::new().name("fbksd-accept".into()).spawn(move || accept_loop(listener, accept_tx))?;
         Ok(SceneRunner {
             dir,
+            launcher: Arc::new(LocalLauncher),
             renderer_argv,
             renderer_log,
             limits,
@@ -189,6 +196,21 @@ impl SceneRunner {
             sessions: 0,
             early_techniques: Vec::new(),
         })
+    }
+
+    /// Starts the renderer and the techniques with `launcher` instead of as
+    /// local children. When its processes run as another user, the
+    /// directory becomes traversable (not listable) and its files open to
+    /// them: the directory's unguessable name and its parent are what keep
+    /// other users out, and in a container only this directory is mounted.
+    pub fn with_launcher(mut self, launcher: Arc<dyn Launcher>) -> std::io::Result<Self> {
+        if launcher.shares_files_with_other_users() {
+            std::fs::set_permissions(self.dir.path(), std::fs::Permissions::from_mode(0o711))?;
+            let socket = rendezvous::control_socket(self.dir.path());
+            std::fs::set_permissions(socket, std::fs::Permissions::from_mode(0o666))?;
+        }
+        self.launcher = launcher;
+        Ok(self)
     }
 
     /// The rendezvous directory (what `FBKSD_RENDEZVOUS` names).
@@ -222,12 +244,20 @@ impl SceneRunner {
     fn start_renderer(&mut self) -> Result<(), String> {
         let generation = self.next_generation();
         let on_exit = report_to(self.tx.clone(), move |info| Event::RendererExited(generation, info));
-        let env = [(rendezvous::ENV_VAR, self.dir.path().as_os_str())];
-        let process = Supervised::spawn(&self.renderer_argv, &env, self.renderer_log.as_deref(), on_exit)
+        let spec = LaunchSpec {
+            role: ProcessRole::Renderer,
+            argv: &self.renderer_argv,
+            rendezvous: self.dir.path(),
+            session_token: None,
+            log: self.renderer_log.as_deref(),
+        };
+        let process = self
+            .launcher
+            .launch(&spec, Box::new(on_exit))
             .map_err(|e| format!("renderer {}: {e}", shell_words::join(&self.renderer_argv)))?;
         let deadline = Instant::now() + self.limits.renderer_start;
         let mut writer: Option<UnixStream> = None;
-        let fail = |process: &Supervised, why: String| {
+        let fail = |process: &dyn Running, why: String| {
             process.kill();
             Err(format!("{why}{}", log_note(self.renderer_log.as_deref())))
         };
@@ -236,7 +266,7 @@ impl SceneRunner {
                 Some(e) => e,
                 None => {
                     return fail(
-                        &process,
+                        process.as_ref(),
                         format!("the renderer did not become ready within {:?}", self.limits.renderer_start),
                     )
                 }
@@ -245,7 +275,7 @@ impl SceneRunner {
                 Event::Connected(stream, hello) if hello.role == Role::Renderer && writer.is_none() => {
                     let mut w = match stream.try_clone() {
                         Ok(w) => w,
-                        Err(e) => return fail(&process, format!("renderer connection: {e}")),
+                        Err(e) => return fail(process.as_ref(), format!("renderer connection: {e}")),
                     };
                     // A renderer that stops reading must not block the manager.
                     let _ = w.set_write_timeout(Some(Duration::from_secs(30)));
@@ -261,7 +291,7 @@ impl SceneRunner {
                 }
                 Event::Renderer(g, Ok(Some(FromRenderer::Ready { tile_size, scene_info }))) if g == generation => {
                     if let Err(e) = scene_info.width().and(scene_info.height()) {
-                        return fail(&process, format!("the renderer's scene info is unusable: {e}"));
+                        return fail(process.as_ref(), format!("the renderer's scene info is unusable: {e}"));
                     }
                     let writer = writer.take().expect("ready comes after connect");
                     self.renderer =
@@ -269,13 +299,16 @@ impl SceneRunner {
                     return Ok(());
                 }
                 Event::Renderer(g, Ok(Some(FromRenderer::Failed { message }))) if g == generation => {
-                    return fail(&process, format!("the renderer failed to start: {message}"));
+                    return fail(process.as_ref(), format!("the renderer failed to start: {message}"));
                 }
                 Event::Renderer(g, other) if g == generation => {
-                    return fail(&process, format!("the renderer sent {other:?} instead of ready"));
+                    return fail(process.as_ref(), format!("the renderer sent {other:?} instead of ready"));
                 }
                 Event::RendererExited(g, info) if g == generation => {
-                    return fail(&process, format!("the renderer exited ({}) before it was ready", info.describe()));
+                    return fail(
+                        process.as_ref(),
+                        format!("the renderer exited ({}) before it was ready", info.describe()),
+                    );
                 }
                 _ => {} // stale events of earlier processes
             }
@@ -335,7 +368,13 @@ impl SceneRunner {
         let result_path = self.dir.path().join(&result_file);
         // The manager never maps the result: it reads it once, with pread,
         // so a technique that truncates the file cannot crash it.
-        let result_buffer = match fbksd_core::shm::create_file(&result_path, pixels * 12) {
+        let result_buffer = match fbksd_core::shm::create_file(&result_path, pixels * 12).and_then(|f| {
+            if self.launcher.shares_files_with_other_users() {
+                f.set_permissions(std::fs::Permissions::from_mode(0o666))
+                    .map_err(|source| fbksd_core::shm::ShmError::Io { path: result_path.clone(), source })?;
+            }
+            Ok(f)
+        }) {
             Ok(f) => f,
             Err(e) => {
                 outcome.status = RunStatus::LaunchFailed;
@@ -354,21 +393,26 @@ impl SceneRunner {
         let technique = match launch {
             TechniqueLaunch::Command(argv) => {
                 let on_exit = report_to(self.tx.clone(), move |i| Event::TechniqueExited(technique_generation, i));
-                let env = [
-                    (rendezvous::ENV_VAR, self.dir.path().as_os_str()),
-                    (rendezvous::SESSION_ENV_VAR, std::ffi::OsStr::new(token.as_deref().unwrap_or(""))),
-                ];
-                match Supervised::spawn(argv, &env, Some(technique_log), on_exit) {
+                let spec = LaunchSpec {
+                    role: ProcessRole::Technique,
+                    argv,
+                    rendezvous: self.dir.path(),
+                    session_token: token.as_deref(),
+                    log: Some(technique_log),
+                };
+                match self.launcher.launch(&spec, Box::new(on_exit)) {
                     Ok(p) => Some(p),
                     Err(e) => return launch_failed(outcome, e.to_string(), &result_path),
                 }
             }
             TechniqueLaunch::External => None,
         };
+        let started = technique.as_ref().map_or(started, |t| t.started_at());
 
         let mut s = Session {
             token,
             dir: self.dir.path().to_path_buf(),
+            shared: self.launcher.shares_files_with_other_users(),
             id: session_id,
             generation: technique_generation,
             spawned: technique.is_some(),
@@ -531,11 +575,17 @@ impl SceneRunner {
                 },
                 Event::TechniqueExited(g, info) if g == s.generation => {
                     let status = info.status;
+                    let out_of_memory = info.out_of_memory;
                     s.exit = Some(info);
                     if let Some(v) = verdict {
                         return v;
                     }
-                    Some(if status.success() {
+                    Some(if out_of_memory {
+                        (
+                            RunStatus::OutOfMemory,
+                            "the technique was killed for going over its memory limit before sending a result".into(),
+                        )
+                    } else if status.success() {
                         (RunStatus::NoResult, "the technique exited (exit code 0) without sending a result".into())
                     } else {
                         (

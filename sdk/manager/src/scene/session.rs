@@ -52,6 +52,8 @@ pub(super) struct Session {
     /// The token a spawned technique must present (none in debug mode).
     pub(super) token: Option<String>,
     pub(super) dir: PathBuf,
+    /// Whether the launcher's processes run as other users (files open to them).
+    pub(super) shared: bool,
     pub(super) id: u64,
     pub(super) generation: u64,
     /// Whether the manager started the technique (so it can wait for its exit).
@@ -213,7 +215,15 @@ impl Session {
                     .max(self.spp.max(1) * sample_bytes)
                     .next_multiple_of(4096);
                 let spec = RingSpec { session: self.id, slot_count, slot_bytes };
-                if let Err(e) = Ring::create_file(&self.dir, spec) {
+                let created = Ring::create_file(&self.dir, spec).map_err(|e| e.to_string()).and_then(|path| {
+                    if self.shared {
+                        use std::os::unix::fs::PermissionsExt;
+                        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o666))
+                            .map_err(|e| format!("{}: {e}", path.display()))?;
+                    }
+                    Ok(())
+                });
+                if let Err(e) = created {
                     return self.renderer_failed(format!("cannot create the sample ring: {e}"));
                 }
                 self.pipe_size = spec.slot_samples(compiled.sample_size());
