@@ -10,7 +10,9 @@ APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3
     # fbksd-server: TLS for SMTP; PostgreSQL for its tests (and deployments).
     libssl-dev postgresql git
     # A real browser for the page tests (the live job log).
-    chromium)
+    chromium
+    # fbksd-ci's base image is built from Debian packages (no registry).
+    mmdebstrap)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -21,6 +23,12 @@ if [ ${#missing[@]} -gt 0 ]; then
     [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
     $sudo_cmd apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${missing[@]}"
+fi
+
+# fbksd-ci builds and runs techniques in Docker containers (its tests too).
+if ! docker info >/dev/null 2>&1; then
+    echo "setup: Docker does not answer: install and start the Docker engine (docker.io), then run this again" >&2
+    exit 1
 fi
 
 if ! command -v cargo >/dev/null; then

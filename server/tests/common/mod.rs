@@ -74,6 +74,11 @@ pub async fn spawn_with(db: Db, adjust: impl FnOnce(&mut Config)) -> TestServer 
 }
 
 impl TestServer {
+    /// A server started elsewhere (another process) at `url`, writing its mail to `outbox`.
+    pub fn at(url: String, outbox: PathBuf) -> TestServer {
+        TestServer { url, outbox, admin: None, config: Config::default(), _data: None }
+    }
+
     /// A second server instance on the same database and data directory,
     /// as in a deployment with several instances behind a load balancer.
     pub async fn another_instance(&self) -> TestServer {

@@ -1,0 +1,212 @@
+//! The server's runner API, as a runner sees it.
+//!
+//! Every call that carries a job's outcome (log, files, results, finish)
+//! is retried across connection failures and 5xx answers for
+//! [`JOB_PATIENCE`], so a server restarted mid-job loses nothing: the job's
+//! token lives in the server's database and is valid again once it is back.
+//! A 410 means the job is no longer this runner's (cancelled, finished, or
+//! requeued after a lost lease): the runner stops working on it.
+
+use serde::Deserialize;
+use std::time::Duration;
+
+/// How long a job's calls keep trying while the server is unreachable.
+pub const JOB_PATIENCE: Duration = Duration::from_secs(15 * 60);
+
+/// Why a call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    /// HTTP 410: the job is no longer this runner's.
+    #[error("the server no longer holds this job for this runner (cancelled, finished, or its lease was lost)")]
+    JobGone,
+    /// A 4xx answer other than 410.
+    #[error("the server refused {what} (HTTP {status}): {body}")]
+    Refused {
+        /// What was asked.
+        what: String,
+        /// HTTP status.
+        status: u16,
+        /// The server's explanation.
+        body: String,
+    },
+    /// No usable answer within the patience.
+    #[error("the server did not answer {what} within {patience:?}: {last}")]
+    Unreachable {
+        /// What was asked.
+        what: String,
+        /// How long it kept trying.
+        patience: Duration,
+        /// The last error.
+        last: String,
+    },
+}
+
+/// A runner's identity on the server.
+#[derive(Debug, Clone, serde::Serialize, Deserialize)]
+pub struct RunnerCredentials {
+    /// Runner id.
+    pub id: String,
+    /// Runner token (`fbksdr_…`).
+    pub token: String,
+}
+
+/// A claimed job, as the server describes it.
+#[derive(Debug, Clone, Deserialize)]
+pub struct Claim {
+    /// The job row.
+    pub job: ClaimedJob,
+    /// The job token (`fbksdj_…`), valid for this attempt only.
+    pub token: String,
+    /// Clone URL of the technique's repository.
+    pub repository: String,
+    /// The commit to build.
+    pub commit: String,
+    /// Lease length: heartbeat well within it.
+    pub lease_seconds: u64,
+    /// The server's public URL.
+    pub results_url: String,
+}
+
+/// The fields of a job the runner uses.
+#[derive(Debug, Clone, Deserialize)]
+pub struct ClaimedJob {
+    /// Job id.
+    pub id: String,
+    /// Project (technique) name.
+    pub project: String,
+    /// `build` or `benchmark`.
+    pub kind: String,
+    /// Attempt number (1 for the first claim).
+    pub attempts: i64,
+}
+
+/// The server's runner API.
+#[derive(Debug, Clone)]
+pub struct Api {
+    http: reqwest::Client,
+    base: String,
+}
+
+impl Api {
+    /// A client of the server at `base` (e.g. `http://127.0.0.1:8096`).
+    pub fn new(base: &str) -> Api {
+        let http = reqwest::Client::builder()
+            .connect_timeout(Duration::from_secs(10))
+            .build()
+            .expect("a reqwest client with default TLS");
+        Api { http, base: base.trim_end_matches('/').to_string() }
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("{}/api/v1/{path}", self.base)
+    }
+
+    /// Sends the request `build` makes, retrying connection failures and
+    /// 5xx answers for `patience`.
+    async fn send(
+        &self,
+        what: &str,
+        patience: Duration,
+        build: impl Fn() -> reqwest::RequestBuilder,
+    ) -> Result<reqwest::Response, ApiError> {
+        let deadline = tokio::time::Instant::now() + patience;
+        let mut pause = Duration::from_millis(250);
+        loop {
+            let last = match build().timeout(Duration::from_secs(120)).send().await {
+                Ok(r) if r.status() == reqwest::StatusCode::GONE => return Err(ApiError::JobGone),
+                Ok(r) if r.status().is_client_error() => {
+                    let status = r.status().as_u16();
+                    let body = r.text().await.unwrap_or_default();
+                    return Err(ApiError::Refused { what: what.into(), status, body });
+                }
+                Ok(r) if r.status().is_server_error() => format!("HTTP {}", r.status()),
+                Ok(r) => return Ok(r),
+                Err(e) => format!("{e}"),
+            };
+            if tokio::time::Instant::now() + pause > deadline {
+                return Err(ApiError::Unreachable { what: what.into(), patience, last });
+            }
+            tracing::warn!("{what}: {last}; trying again in {pause:?}");
+            tokio::time::sleep(pause).await;
+            pause = (pause * 2).min(Duration::from_secs(5));
+        }
+    }
+
+    /// Registers a runner with the server's registration token.
+    pub async fn register(
+        &self,
+        registration_token: &str,
+        name: &str,
+        machine: &serde_json::Value,
+    ) -> Result<RunnerCredentials, ApiError> {
+        let body = serde_json::json!({ "registration_token": registration_token, "name": name, "machine": machine });
+        let response =
+            self.send("registration", JOB_PATIENCE, || self.http.post(self.url("runners")).json(&body)).await?;
+        response.json().await.map_err(|e| unreadable("registration", e))
+    }
+
+    /// Asks for a job, waiting up to `wait_seconds` on the server; `None` when none came.
+    pub async fn claim(&self, runner_token: &str, wait_seconds: u64) -> Result<Option<Claim>, ApiError> {
+        let body = serde_json::json!({ "wait_seconds": wait_seconds });
+        let response = self
+            .send("a claim", Duration::from_secs(30), || {
+                self.http.post(self.url("runners/jobs")).bearer_auth(runner_token).json(&body)
+            })
+            .await?;
+        if response.status() == reqwest::StatusCode::NO_CONTENT {
+            return Ok(None);
+        }
+        response.json().await.map(Some).map_err(|e| unreadable("a claim", e))
+    }
+
+    /// Extends a job's lease (one attempt: heartbeats repeat anyway).
+    pub async fn heartbeat(&self, job: &Claim) -> Result<(), ApiError> {
+        self.send("a heartbeat", Duration::ZERO, || self.job_request(job, reqwest::Method::POST, "heartbeat"))
+            .await
+            .map(drop)
+    }
+
+    /// Appends text to a job's log.
+    pub async fn log(&self, job: &Claim, text: &str) -> Result<(), ApiError> {
+        let text = text.to_string();
+        self.send("a log", JOB_PATIENCE, || self.job_request(job, reqwest::Method::POST, "log").body(text.clone()))
+            .await
+            .map(drop)
+    }
+
+    /// Uploads one result file.
+    pub async fn put_file(&self, job: &Claim, name: &str, bytes: Vec<u8>) -> Result<(), ApiError> {
+        let what = format!("the file {name}");
+        self.send(&what, JOB_PATIENCE, || {
+            self.job_request(job, reqwest::Method::PUT, &format!("files/{name}")).body(bytes.clone())
+        })
+        .await
+        .map(drop)
+    }
+
+    /// Uploads the results (runs, metrics, scenes, provenance).
+    pub async fn put_results(&self, job: &Claim, upload: &serde_json::Value) -> Result<(), ApiError> {
+        self.send("the results", JOB_PATIENCE, || self.job_request(job, reqwest::Method::PUT, "results").json(upload))
+            .await
+            .map(drop)
+    }
+
+    /// Ends the job; returns the private results URL of a benchmark's result set.
+    pub async fn finish(&self, job: &Claim, outcome: &serde_json::Value) -> Result<Option<String>, ApiError> {
+        let response = self
+            .send("the job's end", JOB_PATIENCE, || {
+                self.job_request(job, reqwest::Method::POST, "finish").json(outcome)
+            })
+            .await?;
+        let body: serde_json::Value = response.json().await.map_err(|e| unreadable("the job's end", e))?;
+        Ok(body["results_url"].as_str().map(str::to_string))
+    }
+
+    fn job_request(&self, job: &Claim, method: reqwest::Method, what: &str) -> reqwest::RequestBuilder {
+        self.http.request(method, self.url(&format!("jobs/{}/{what}", job.job.id))).bearer_auth(&job.token)
+    }
+}
+
+fn unreadable(what: &str, e: reqwest::Error) -> ApiError {
+    ApiError::Refused { what: what.into(), status: 200, body: format!("unreadable answer: {e}") }
+}

@@ -1,0 +1,101 @@
+//! The runner's settings: flags, or `FBKSD_*` environment variables.
+
+use clap::Args;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Everything a runner needs to know.
+#[derive(Debug, Clone, Args)]
+pub struct RunnerConfig {
+    /// The server's base URL, e.g. http://127.0.0.1:8096.
+    #[arg(long, env = "FBKSD_SERVER")]
+    pub server: String,
+
+    /// The server's runner registration token (needed once: the runner
+    /// token it buys is kept in the work directory).
+    #[arg(long, env = "FBKSD_REGISTRATION_TOKEN", hide_env_values = true)]
+    pub registration_token: Option<String>,
+
+    /// This runner's name on the server (default: the host name).
+    #[arg(long, env = "FBKSD_CI_NAME")]
+    pub name: Option<String>,
+
+    /// Where the runner keeps its identity and each job's files.
+    #[arg(long, env = "FBKSD_CI_WORK_DIR", default_value = "fbksd-ci")]
+    pub work_dir: PathBuf,
+
+    /// The image manifest written by `deploy/build-images.sh`.
+    #[arg(long, env = "FBKSD_CI_IMAGES")]
+    pub images: PathBuf,
+
+    /// The scene pool on this machine: the directory the renderer image
+    /// holds at /scenes, with the references beside each scene.
+    #[arg(long, env = "FBKSD_CI_SCENE_ROOT", default_value = "scenes")]
+    pub scene_root: PathBuf,
+
+    /// Scenes benchmarked, as directories under the scene root (repeatable;
+    /// default: every experimental scene).
+    #[arg(long = "scene", env = "FBKSD_CI_SCENES", value_delimiter = ',')]
+    pub scenes: Vec<String>,
+
+    /// Budgets in samples per pixel (default: each scene's own list).
+    #[arg(long, env = "FBKSD_CI_SPP", value_delimiter = ',')]
+    pub spp: Vec<u64>,
+
+    /// Cores every container is pinned to, e.g. "0-1" (default: all).
+    #[arg(long, env = "FBKSD_CI_CPUS")]
+    pub cpus: Option<String>,
+
+    /// Memory of a technique's container (build or run), in MiB; swap is not allowed.
+    #[arg(long, env = "FBKSD_CI_MEMORY_MIB", default_value_t = 2048)]
+    pub memory_mib: u64,
+
+    /// Memory of a renderer's container, in MiB.
+    #[arg(long, env = "FBKSD_CI_RENDERER_MEMORY_MIB", default_value_t = 4096)]
+    pub renderer_memory_mib: u64,
+
+    /// Size of a container's writable /tmp, in MiB.
+    #[arg(long, env = "FBKSD_CI_TMPFS_MIB", default_value_t = 256)]
+    pub tmpfs_mib: u64,
+
+    /// Processes a container may hold at once.
+    #[arg(long, env = "FBKSD_CI_PIDS", default_value_t = 256)]
+    pub pids: i64,
+
+    /// Wall-time limit of a build.
+    #[arg(long, env = "FBKSD_CI_BUILD_TIMEOUT", default_value = "15m", value_parser = humantime::parse_duration)]
+    pub build_timeout: Duration,
+
+    /// Wall-time limit of one run (scene × budget).
+    #[arg(long, env = "FBKSD_CI_RUN_TIMEOUT", default_value = "10m", value_parser = humantime::parse_duration)]
+    pub run_timeout: Duration,
+
+    /// How long a claim waits for a job before asking again.
+    #[arg(long, env = "FBKSD_CI_POLL_SECONDS", default_value_t = 20)]
+    pub poll_seconds: u64,
+}
+
+impl RunnerConfig {
+    /// The scenes benchmarked: the configured ones, or every experimental scene.
+    pub fn scene_dirs(&self) -> std::io::Result<Vec<String>> {
+        if !self.scenes.is_empty() {
+            return Ok(self.scenes.clone());
+        }
+        let mut found = Vec::new();
+        for entry in std::fs::read_dir(self.scene_root.join("experimental"))? {
+            let entry = entry?;
+            if entry.path().join(fbksd_manager::scenes::META_FILE).is_file() {
+                found.push(format!("experimental/{}", entry.file_name().to_string_lossy()));
+            }
+        }
+        found.sort();
+        Ok(found)
+    }
+
+    /// The runner's name: configured, or the host name.
+    pub fn runner_name(&self) -> String {
+        self.name.clone().unwrap_or_else(|| {
+            std::fs::read_to_string("/proc/sys/kernel/hostname").map_or("runner".into(), |h| h.trim().to_string())
+        })
+    }
+}

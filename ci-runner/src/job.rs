@@ -1,0 +1,529 @@
+//! One job, from clone to finish.
+//!
+//! 1. **Clone** the repository at the job's pinned commit, with the job's
+//!    token in an HTTP header passed through git's environment (never in a
+//!    URL, a file or the command line).
+//! 2. **Check** `info.json` (the same rules as the server's).
+//! 3. **Build** in a sandboxed container of the environment image: CMake
+//!    for `cpp`; a syntax check and an `import fbksd` for `python`.
+//! 4. **Benchmark** (benchmark jobs): every scene of the pool at each
+//!    budget, one run after another, through the manager with the
+//!    [`DockerLauncher`]; then the metrics, here, against the references.
+//! 5. **Upload** the files and the results, and report the end.
+//!
+//! Every failure is a [`Failure`] with a typed [`FailureReason`] and a message the
+//! author can act on.
+
+use crate::api::{Api, ApiError, Claim};
+use crate::images::Images;
+use crate::launcher::{DockerLauncher, RoleContainer};
+use crate::machine::Machine;
+use crate::pool::PoolScene;
+use crate::sandbox::{ContainerEnd, ContainerSpec, Mount, Sandbox};
+use crate::RunnerConfig;
+use fbksd_iqa::Metric;
+use fbksd_manager::evaluation::{compute, AnyMetric};
+use fbksd_manager::results::{path_safe_name, ResultsDir};
+use fbksd_manager::technique::{Environment, TechniqueInfo};
+use fbksd_manager::{Benchmark, FailureReason, Limits, Progress, RunStatus, SceneSpec, TechniqueSpec};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// A failed job.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Failure {
+    /// The typed reason.
+    pub reason: FailureReason,
+    /// What happened, for the author.
+    pub message: String,
+}
+
+impl Failure {
+    fn new(reason: FailureReason, message: impl Into<String>) -> Failure {
+        Failure { reason, message: message.into() }
+    }
+
+    fn infrastructure(message: impl Into<String>) -> Failure {
+        Failure::new(FailureReason::InfrastructureError, message)
+    }
+}
+
+impl From<ApiError> for Failure {
+    fn from(e: ApiError) -> Failure {
+        Failure::infrastructure(e.to_string())
+    }
+}
+
+/// A job's log, sent to the server in batches (see [`JobLog::flush`]).
+#[derive(Debug, Clone, Default)]
+pub struct JobLog {
+    pending: Arc<Mutex<String>>,
+}
+
+impl JobLog {
+    /// Adds a line.
+    pub fn line(&self, text: impl AsRef<str>) {
+        let text = text.as_ref();
+        tracing::info!("{text}");
+        let mut pending = self.pending.lock().unwrap();
+        pending.push_str(text);
+        pending.push('\n');
+    }
+
+    /// Adds raw output (a container's).
+    pub fn raw(&self, bytes: &[u8]) {
+        self.pending.lock().unwrap().push_str(&String::from_utf8_lossy(bytes));
+    }
+
+    /// Sends what is pending. Text leaves the buffer only once the server
+    /// has it, so a flush cut short (server down, job ending) loses nothing.
+    pub async fn flush(&self, api: &Api, claim: &Claim) -> Result<(), ApiError> {
+        let text = self.pending.lock().unwrap().clone();
+        if text.is_empty() {
+            return Ok(());
+        }
+        api.log(claim, &text).await?;
+        self.pending.lock().unwrap().drain(..text.len());
+        Ok(())
+    }
+}
+
+/// What a job works with.
+#[derive(Debug, Clone)]
+pub struct JobContext {
+    /// Settings.
+    pub config: RunnerConfig,
+    /// The server.
+    pub api: Api,
+    /// The containers.
+    pub sandbox: Sandbox,
+    /// The images.
+    pub images: Images,
+    /// The machine.
+    pub machine: Machine,
+    /// The scene pool.
+    pub scenes: Vec<PoolScene>,
+    /// This runner's id and name.
+    pub runner: (String, String),
+    /// Where rendezvous directories go.
+    pub rendezvous_parent: PathBuf,
+}
+
+/// Set when the job is no longer this runner's: no new container starts.
+pub type Cancelled = Arc<AtomicBool>;
+
+/// Runs a claimed job in `dir` (created, and left for the caller to remove);
+/// returns the success message for the server.
+pub async fn run(
+    ctx: &JobContext,
+    claim: &Claim,
+    dir: &Path,
+    log: &JobLog,
+    cancelled: &Cancelled,
+) -> Result<String, Failure> {
+    let started = Instant::now();
+    std::fs::create_dir_all(dir).map_err(|e| Failure::infrastructure(format!("{}: {e}", dir.display())))?;
+    let src = dir.join("src");
+    log.line(format!(
+        "[fbksd-ci] job {} ({}, attempt {}) on runner {} ({}, {} cores pinned: {})",
+        claim.job.id,
+        claim.job.kind,
+        claim.job.attempts,
+        ctx.runner.1,
+        ctx.machine.cpu_model,
+        ctx.machine.cores,
+        ctx.machine.cpuset
+    ));
+    clone(claim, &src).await?;
+    log.line(format!("[fbksd-ci] checked out {} at {}", claim.job.project, claim.commit));
+
+    let info = check(&src)?;
+    let image = ctx.images.for_environment(info.environment);
+    log.line(format!(
+        "[fbksd-ci] {} ({}): environment {} (image {}, {})",
+        info.full_name,
+        info.short_name,
+        info.environment.as_str(),
+        image.tag,
+        image.id
+    ));
+    let install = build(ctx, claim, &info, &src, dir, log).await?;
+    if claim.job.kind != "benchmark" {
+        return Ok(format!("built in {:.1} s", started.elapsed().as_secs_f64()));
+    }
+    if cancelled.load(Ordering::SeqCst) {
+        return Err(Failure::infrastructure("the job was cancelled"));
+    }
+
+    let results = dir.join("results");
+    let benchmark_started = Instant::now();
+    benchmark(ctx, claim, &info, &install, &results, log, cancelled).await?;
+    let benchmark_time = benchmark_started.elapsed();
+    let upload_started = Instant::now();
+    let (upload, files, summary) = collect(ctx, claim, &info, &results).await?;
+    for (name, path) in &files {
+        let bytes = std::fs::read(path).map_err(|e| Failure::infrastructure(format!("{}: {e}", path.display())))?;
+        ctx.api.put_file(claim, name, bytes).await?;
+    }
+    ctx.api.put_results(claim, &upload).await?;
+    log.line(format!(
+        "[fbksd-ci] {} files uploaded in {:.1} s; benchmark {:.1} s, job {:.1} s",
+        files.len(),
+        upload_started.elapsed().as_secs_f64(),
+        benchmark_time.as_secs_f64(),
+        started.elapsed().as_secs_f64()
+    ));
+    summary
+}
+
+/// Clones the repository at the pinned commit into `src`.
+async fn clone(claim: &Claim, src: &Path) -> Result<(), Failure> {
+    use base64::Engine;
+    let credentials = base64::engine::general_purpose::STANDARD.encode(format!("fbksd-ci:{}", claim.token));
+    let git = |args: &[&str]| {
+        let mut command = tokio::process::Command::new("git");
+        command
+            .args(args)
+            .env("GIT_TERMINAL_PROMPT", "0")
+            .env("GIT_CONFIG_NOSYSTEM", "1")
+            .env("GIT_CONFIG_COUNT", "1")
+            .env("GIT_CONFIG_KEY_0", "http.extraHeader")
+            .env("GIT_CONFIG_VALUE_0", format!("Authorization: Basic {credentials}"))
+            .kill_on_drop(true);
+        command
+    };
+    let src_arg = src.to_string_lossy().into_owned();
+    let steps: [Vec<&str>; 2] = [
+        vec!["clone", "--quiet", "--no-checkout", &claim.repository, &src_arg],
+        vec!["-C", &src_arg, "-c", "advice.detachedHead=false", "checkout", "--quiet", "--detach", &claim.commit],
+    ];
+    for args in steps {
+        let output = tokio::time::timeout(Duration::from_secs(300), git(&args).output())
+            .await
+            .map_err(|_| Failure::infrastructure("git did not finish within 5 minutes"))?
+            .map_err(|e| Failure::infrastructure(format!("cannot run git: {e}")))?;
+        if !output.status.success() {
+            return Err(Failure::infrastructure(format!(
+                "git {} failed: {}",
+                args[0],
+                String::from_utf8_lossy(&output.stderr).trim()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Reads and checks `info.json`.
+fn check(src: &Path) -> Result<TechniqueInfo, Failure> {
+    let text = std::fs::read_to_string(src.join("info.json")).map_err(|e| {
+        Failure::new(FailureReason::BuildFailed, format!("info.json: {e}: add it at the repository's root"))
+    })?;
+    let mut files = Vec::new();
+    list_files(src, src, &mut files);
+    TechniqueInfo::parse(&text, &files).map_err(|e| Failure::new(FailureReason::BuildFailed, e))
+}
+
+fn list_files(root: &Path, dir: &Path, out: &mut Vec<String>) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if entry.file_name() == ".git" {
+            continue;
+        }
+        match entry.file_type() {
+            Ok(t) if t.is_dir() => list_files(root, &path, out),
+            Ok(_) => out.push(path.strip_prefix(root).unwrap_or(&path).to_string_lossy().into_owned()),
+            Err(_) => {}
+        }
+    }
+}
+
+/// Where a built technique's files are, and how its container sees them.
+struct Install {
+    host: PathBuf,
+}
+
+/// Where a technique's files are mounted in its container.
+const TECHNIQUE_MOUNT: &str = "/technique";
+
+/// Builds the technique in a sandbox; returns the directory its executables are in.
+async fn build(
+    ctx: &JobContext,
+    claim: &Claim,
+    info: &TechniqueInfo,
+    src: &Path,
+    dir: &Path,
+    log: &JobLog,
+) -> Result<Install, Failure> {
+    let image = ctx.images.for_environment(info.environment).tag.clone();
+    let (spec, install) = match info.environment {
+        Environment::Cpp => {
+            let build = dir.join("build");
+            std::fs::create_dir_all(&build).map_err(|e| Failure::infrastructure(e.to_string()))?;
+            let (uid, gid) = Sandbox::user();
+            std::os::unix::fs::chown(&build, Some(uid), Some(gid))
+                .map_err(|e| Failure::infrastructure(format!("{}: {e}", build.display())))?;
+            let script = format!(
+                "cmake -S /src -B /build -DCMAKE_BUILD_TYPE=Release && cmake --build /build --parallel {}",
+                ctx.machine.cores
+            );
+            let spec = ContainerSpec {
+                image,
+                cmd: vec!["sh".into(), "-c".into(), script],
+                env: vec!["HOME=/tmp".into()],
+                mounts: vec![
+                    Mount { host: src.to_path_buf(), container: "/src".into(), writable: false },
+                    Mount { host: build.clone(), container: "/build".into(), writable: true },
+                ],
+                working_dir: Some("/build".into()),
+                memory_mib: ctx.config.memory_mib,
+                job_id: claim.job.id.clone(),
+            };
+            (spec, Install { host: build })
+        }
+        Environment::Python => {
+            let mut cmd = vec![
+                "python3".to_string(),
+                "-c".to_string(),
+                "import ast, sys\nfor path in sys.argv[1:]:\n    ast.parse(open(path, 'rb').read(), path)\nimport fbksd.client\nprint('syntax of', ', '.join(sys.argv[1:]), 'checked; fbksd', fbksd.__version__ if hasattr(fbksd, '__version__') else '', 'imported')".to_string(),
+            ];
+            cmd.extend(info.versions.iter().map(|v| v.executable.clone()));
+            let spec = ContainerSpec {
+                image,
+                cmd,
+                env: vec!["HOME=/tmp".into(), "PYTHONDONTWRITEBYTECODE=1".into()],
+                mounts: vec![Mount { host: src.to_path_buf(), container: TECHNIQUE_MOUNT.into(), writable: false }],
+                working_dir: Some(TECHNIQUE_MOUNT.into()),
+                memory_mib: ctx.config.memory_mib,
+                job_id: claim.job.id.clone(),
+            };
+            (spec, Install { host: src.to_path_buf() })
+        }
+    };
+    log.line(format!("[fbksd-ci] build: {}", spec.cmd.join(" ").lines().next().unwrap_or("")));
+    let tail = Arc::new(Mutex::new(Vec::<u8>::new()));
+    let sink = {
+        let tail = tail.clone();
+        let log = log.clone();
+        move |bytes: &[u8]| {
+            log.raw(bytes);
+            let mut t = tail.lock().unwrap();
+            t.extend_from_slice(bytes);
+            let excess = t.len().saturating_sub(4000);
+            t.drain(..excess);
+        }
+    };
+    let (end, took) = ctx
+        .sandbox
+        .run_to_end(&spec, ctx.config.build_timeout, sink)
+        .await
+        .map_err(|e| Failure::infrastructure(format!("Docker: cannot run the build container: {e}")))?;
+    let tail = String::from_utf8_lossy(&tail.lock().unwrap()).trim().to_string();
+    match end {
+        ContainerEnd { timed_out: true, .. } => {
+            return Err(Failure::new(
+                FailureReason::Timeout,
+                format!("the build did not end within {}", humantime::format_duration(ctx.config.build_timeout)),
+            ))
+        }
+        ContainerEnd { out_of_memory: true, .. } => {
+            return Err(Failure::new(
+                FailureReason::OutOfMemory,
+                format!("the build went over its memory limit ({} MiB)", ctx.config.memory_mib),
+            ))
+        }
+        ContainerEnd { exit_code: 0, .. } => {}
+        ContainerEnd { exit_code, .. } => {
+            return Err(Failure::new(
+                FailureReason::BuildFailed,
+                format!("the build failed (exit code {exit_code}):\n{tail}"),
+            ))
+        }
+    }
+    for v in &info.versions {
+        let exe = install.host.join(&v.executable);
+        if !exe.is_file() {
+            return Err(Failure::new(
+                FailureReason::BuildFailed,
+                format!(
+                    "version {:?}: its executable {:?} is not there after the build (for cpp it is looked for in \
+                     the CMake build directory, for python in the repository)",
+                    v.name, v.executable
+                ),
+            ));
+        }
+    }
+    log.line(format!("[fbksd-ci] build succeeded in {:.1} s", took.as_secs_f64()));
+    Ok(install)
+}
+
+/// Runs the first version of the technique on every scene of the pool.
+async fn benchmark(
+    ctx: &JobContext,
+    claim: &Claim,
+    info: &TechniqueInfo,
+    install: &Install,
+    results: &Path,
+    log: &JobLog,
+    cancelled: &Cancelled,
+) -> Result<(), Failure> {
+    let version = &info.versions[0];
+    if info.versions.len() > 1 {
+        log.line(format!("[fbksd-ci] benchmarking version {:?} (the first one in info.json)", version.name));
+    }
+    let exe = format!("{TECHNIQUE_MOUNT}/{}", version.executable);
+    let argv = match info.environment {
+        Environment::Cpp => vec![exe],
+        Environment::Python => vec!["python3".into(), exe],
+    };
+    let scenes = ctx
+        .scenes
+        .iter()
+        .map(|s| SceneSpec {
+            name: s.meta.name.clone(),
+            renderer_argv: s.renderer_argv(),
+            spps: if ctx.config.spp.is_empty() { s.meta.spp.clone() } else { ctx.config.spp.clone() },
+        })
+        .collect();
+    let launcher = DockerLauncher {
+        sandbox: ctx.sandbox.clone(),
+        handle: tokio::runtime::Handle::current(),
+        job_id: claim.job.id.clone(),
+        technique: RoleContainer {
+            image: ctx.images.for_environment(info.environment).tag.clone(),
+            mounts: vec![Mount { host: install.host.clone(), container: TECHNIQUE_MOUNT.into(), writable: false }],
+            working_dir: Some(TECHNIQUE_MOUNT.into()),
+            memory_mib: ctx.config.memory_mib,
+        },
+        renderer: RoleContainer {
+            image: ctx.images.renderer.tag.clone(),
+            mounts: Vec::new(),
+            working_dir: None,
+            memory_mib: ctx.config.renderer_memory_mib,
+        },
+        cancelled: cancelled.clone(),
+    };
+    let bench = Benchmark {
+        techniques: vec![TechniqueSpec { name: info.short_name.clone(), argv }],
+        scenes,
+        results: results.to_path_buf(),
+        limits: Limits {
+            time_limit: Some(ctx.config.run_timeout),
+            rendezvous_parent: Some(ctx.rendezvous_parent.clone()),
+            ..Limits::default()
+        },
+        launcher: Arc::new(launcher),
+    };
+    let log = log.clone();
+    let records = tokio::task::spawn_blocking(move || {
+        bench.run(|p| {
+            if let Progress::RunFinished(r) = p {
+                let how = if r.status == RunStatus::Ok {
+                    format!("technique {:.1} ms, render {:.1} ms", r.times.technique_ms, r.times.render_ms)
+                } else {
+                    format!("{}: {}", r.status, r.message)
+                };
+                log.line(format!("[fbksd-ci] {} at {} spp: {}", r.scene, r.spp_budget, how));
+            }
+        })
+    })
+    .await
+    .map_err(|e| Failure::infrastructure(format!("the benchmark panicked: {e}")))?
+    .map_err(|e| Failure::infrastructure(format!("the benchmark could not write its results: {e}")))?;
+    if cancelled.load(Ordering::SeqCst) {
+        return Err(Failure::infrastructure("the job was cancelled"));
+    }
+    if let Some(first) = records.iter().find(|r| r.status != RunStatus::Ok) {
+        if records.iter().all(|r| r.status != RunStatus::Ok) {
+            let tail = fbksd_manager::process::log_tail(
+                &results.join(path_safe_name(&first.technique)).join(&first.scene).join(&first.technique_log),
+                20,
+            );
+            let output = if tail.is_empty() { String::new() } else { format!("\ntechnique output:\n{tail}") };
+            return Err(Failure::new(
+                first.status.failure_reason(),
+                format!(
+                    "no run succeeded; the first, {} at {} spp, ended {}: {}{output}",
+                    first.scene, first.spp_budget, first.status, first.message
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The upload, the files to send with it, and the success message.
+type Collected = (serde_json::Value, Vec<(String, PathBuf)>, Result<String, Failure>);
+
+/// Computes the metrics and gathers what is uploaded.
+async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results: &Path) -> Result<Collected, Failure> {
+    let scenes: std::collections::BTreeMap<_, _> =
+        ctx.scenes.iter().map(|s| (path_safe_name(&s.meta.name), s.meta.clone())).collect();
+    let metrics: Vec<AnyMetric> = Metric::ALL.iter().map(|m| AnyMetric::Builtin(*m)).collect();
+    let results_dir = ResultsDir::create(results).map_err(|e| Failure::infrastructure(e.to_string()))?;
+    let index = {
+        let metrics = metrics.clone();
+        tokio::task::spawn_blocking(move || {
+            compute(&results_dir, &scenes, &metrics, |_, _| {})?;
+            results_dir.read_index()
+        })
+        .await
+        .map_err(|e| Failure::infrastructure(format!("the metrics panicked: {e}")))?
+        .map_err(|e| Failure::infrastructure(format!("the metrics: {e}")))?
+    };
+    let mut files = Vec::new();
+    collect_files(results, &results.join(path_safe_name(&info.short_name)), &mut files);
+    collect_files(results, &results.join("renderer-logs"), &mut files);
+    let failed = index.runs.iter().filter(|r| r.status != RunStatus::Ok).count();
+    let message = if failed == 0 {
+        format!("{} runs on {} scenes", index.runs.len(), ctx.scenes.len())
+    } else {
+        format!("{} runs on {} scenes, {failed} of them failed (they rank last)", index.runs.len(), ctx.scenes.len())
+    };
+    let environment_image = ctx.images.for_environment(info.environment);
+    let upload = serde_json::json!({
+        "runs": index.runs,
+        "metrics": metrics.iter().map(AnyMetric::info).collect::<Vec<_>>(),
+        "scenes": ctx.scenes.iter().map(|s| serde_json::json!({
+            "name": path_safe_name(&s.meta.name),
+            "tags": s.meta.tags,
+            "scene_hash": s.scene_hash,
+            "reference_hash": s.reference_hash,
+        })).collect::<Vec<_>>(),
+        "provenance": {
+            "image_digest": environment_image.id,
+            "images": {
+                info.environment.as_str(): { "tag": environment_image.tag, "id": environment_image.id },
+                "renderer": { "tag": ctx.images.renderer.tag, "id": ctx.images.renderer.id },
+            },
+            "commit": claim.commit,
+            "version": info.versions[0].name,
+            "runner": ctx.runner.1,
+            "runner_id": ctx.runner.0,
+            "machine": ctx.machine,
+            "limits": {
+                "run_timeout_s": ctx.config.run_timeout.as_secs_f64(),
+                "memory_mib": ctx.config.memory_mib,
+                "pids": ctx.config.pids,
+            },
+            "fbksd_ci": env!("CARGO_PKG_VERSION"),
+        },
+    });
+    Ok((upload, files, Ok(message)))
+}
+
+/// Every file under `dir`, named relative to `root`.
+fn collect_files(root: &Path, dir: &Path, out: &mut Vec<(String, PathBuf)>) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let mut entries: Vec<_> = entries.flatten().map(|e| e.path()).collect();
+    entries.sort();
+    for path in entries {
+        if path.is_dir() {
+            collect_files(root, &path, out);
+        } else if let Ok(rel) = path.strip_prefix(root) {
+            out.push((rel.to_string_lossy().into_owned(), path.clone()));
+        }
+    }
+}

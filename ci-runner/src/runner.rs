@@ -1,0 +1,251 @@
+//! A runner's life: identity, the claim loop, heartbeats and clean-up.
+//!
+//! - **Identity.** The runner registers once with the server's
+//!   registration token and keeps its id and token in
+//!   `<work dir>/runner.json` (mode 0600).
+//! - **Docker first.** No job is claimed while Docker does not answer, so
+//!   a runner without Docker never takes a job it cannot do; a job whose
+//!   containers fail to start ends `infrastructure_error`, which the server
+//!   queues again.
+//! - **One job at a time** on pinned cores, so timings are comparable.
+//! - **Heartbeats** every third of the lease. A 410 means the job is no
+//!   longer this runner's: its containers are removed and nothing new starts.
+//! - **Clean-up.** After every job, its containers and files are removed;
+//!   at start, whatever a killed predecessor left (containers with this
+//!   runner's label, job directories, rendezvous directories).
+
+use crate::api::{Api, Claim, RunnerCredentials};
+use crate::images::Images;
+use crate::job::{self, Failure, JobContext, JobLog};
+use crate::machine::Machine;
+use crate::sandbox::Sandbox;
+use crate::RunnerConfig;
+use bollard::Docker;
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// A registered runner, ready to claim jobs.
+#[derive(Debug)]
+pub struct Runner {
+    ctx: JobContext,
+    credentials: RunnerCredentials,
+}
+
+/// Connects to Docker (as `DOCKER_HOST` says, or the local socket) and
+/// checks that it answers.
+pub async fn connect_docker() -> Result<Docker, String> {
+    let docker = Docker::connect_with_local_defaults().map_err(|e| e.to_string())?;
+    let docker = docker.negotiate_version().await.map_err(|e| e.to_string())?;
+    docker.ping().await.map_err(|e| e.to_string())?;
+    Ok(docker)
+}
+
+/// Waits until Docker answers, saying so every 5 seconds.
+async fn wait_for_docker() -> Docker {
+    loop {
+        match connect_docker().await {
+            Ok(docker) => return docker,
+            Err(e) => {
+                let host = std::env::var("DOCKER_HOST").unwrap_or_else(|_| "unix:///var/run/docker.sock".into());
+                tracing::error!(
+                    "Docker is unavailable at {host} ({e}); this runner claims no job until it answers (retrying every 5 s)"
+                );
+                tokio::time::sleep(Duration::from_secs(5)).await;
+            }
+        }
+    }
+}
+
+impl Runner {
+    /// Registers (or reloads its identity), waits for Docker, checks the
+    /// images and the scene pool, and removes what a previous run left.
+    pub async fn start(mut config: RunnerConfig) -> anyhow::Result<Runner> {
+        std::fs::create_dir_all(&config.work_dir)?;
+        // Docker mounts need absolute paths.
+        config.work_dir = std::fs::canonicalize(&config.work_dir)?;
+        config.scene_root = std::fs::canonicalize(&config.scene_root)
+            .map_err(|e| anyhow::anyhow!("scene root {}: {e}", config.scene_root.display()))?;
+        let api = Api::new(&config.server);
+        let machine = Machine::probe(config.cpus.as_deref());
+        let scenes = crate::pool::load(&config.scene_root, &config.scene_dirs()?)?;
+        let credentials = identity(&config, &api, &machine).await?;
+        let docker = wait_for_docker().await;
+        let images = Images::resolve(&config.images, &docker).await?;
+        let sandbox = Sandbox::new(docker, &credentials.id, config.cpus.clone(), config.pids, config.tmpfs_mib);
+        let rendezvous_parent = rendezvous_parent(&credentials.id, &config.work_dir);
+        let left = sandbox.remove_runner_containers().await;
+        if left > 0 {
+            tracing::warn!("removed {left} containers a previous run of this runner left behind");
+        }
+        for dir in [config.work_dir.join("jobs"), rendezvous_parent.clone()] {
+            let _ = std::fs::remove_dir_all(&dir);
+            std::fs::create_dir_all(&dir)?;
+        }
+        std::fs::set_permissions(&rendezvous_parent, std::fs::Permissions::from_mode(0o700))?;
+        tracing::info!(
+            "runner {} ({}) ready: {} scenes, images {} / {} / {}, {} on cores {}",
+            config.runner_name(),
+            credentials.id,
+            scenes.len(),
+            images.cpp.tag,
+            images.python.tag,
+            images.renderer.tag,
+            machine.cpu_model,
+            machine.cpuset
+        );
+        let runner = (credentials.id.clone(), config.runner_name());
+        Ok(Runner {
+            ctx: JobContext { config, api, sandbox, images, machine, scenes, runner, rendezvous_parent },
+            credentials,
+        })
+    }
+
+    /// This runner's id on the server.
+    pub fn id(&self) -> &str {
+        &self.credentials.id
+    }
+
+    /// Claims and runs jobs, one at a time, until `shutdown` resolves.
+    pub async fn run(self, shutdown: impl std::future::Future<Output = ()>) {
+        tokio::pin!(shutdown);
+        loop {
+            if let Err(e) = self.ctx.sandbox.docker.ping().await {
+                tracing::error!("Docker stopped answering ({e}); no job is claimed until it is back");
+                tokio::select! {
+                    _ = &mut shutdown => break,
+                    _ = tokio::time::sleep(Duration::from_secs(5)) => continue,
+                }
+            }
+            let claimed = tokio::select! {
+                _ = &mut shutdown => break,
+                c = self.ctx.api.claim(&self.credentials.token, self.ctx.config.poll_seconds) => c,
+            };
+            match claimed {
+                Ok(Some(claim)) => {
+                    tokio::select! {
+                        _ = &mut shutdown => break,
+                        () = self.handle(&claim) => {}
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    tracing::error!("claiming a job: {e}");
+                    tokio::select! {
+                        _ = &mut shutdown => break,
+                        _ = tokio::time::sleep(Duration::from_secs(5)) => {}
+                    }
+                }
+            }
+        }
+        let removed = self.ctx.sandbox.remove_runner_containers().await;
+        tracing::info!("runner stopped ({removed} containers removed)");
+    }
+
+    /// Runs one claimed job with heartbeats and a streaming log, reports
+    /// its end, and cleans up after it.
+    async fn handle(&self, claim: &Claim) {
+        let ctx = &self.ctx;
+        let log = JobLog::default();
+        let cancelled = Arc::new(AtomicBool::new(false));
+        let dir = ctx.config.work_dir.join("jobs").join(&claim.job.id);
+        tracing::info!("job {} ({} of {}) claimed", claim.job.id, claim.job.kind, claim.job.project);
+        let beat = Duration::from_secs((claim.lease_seconds / 3).max(1));
+        let keepalive = async {
+            let mut tick = tokio::time::interval(beat.min(Duration::from_secs(1)));
+            let mut since_beat = Duration::ZERO;
+            loop {
+                tick.tick().await;
+                since_beat += beat.min(Duration::from_secs(1));
+                let _ = log.flush(&ctx.api, claim).await;
+                if since_beat >= beat {
+                    since_beat = Duration::ZERO;
+                    if let Err(crate::api::ApiError::JobGone) = ctx.api.heartbeat(claim).await {
+                        return;
+                    }
+                }
+            }
+        };
+        let outcome = tokio::select! {
+            outcome = job::run(ctx, claim, &dir, &log, &cancelled) => Some(outcome),
+            () = keepalive => None,
+        };
+        let Some(outcome) = outcome else {
+            cancelled.store(true, Ordering::SeqCst);
+            let removed = ctx.sandbox.remove_job_containers(&claim.job.id).await;
+            tracing::warn!("job {} is no longer this runner's: stopped ({removed} containers removed)", claim.job.id);
+            let _ = std::fs::remove_dir_all(&dir);
+            return;
+        };
+        let body = match &outcome {
+            Ok(message) => {
+                log.line(format!("[fbksd-ci] succeeded: {message}"));
+                serde_json::json!({ "state": "succeeded", "message": message })
+            }
+            Err(Failure { reason, message }) => {
+                log.line(format!("[fbksd-ci] failed ({}): {message}", reason.as_str()));
+                serde_json::json!({ "state": "failed", "reason": reason, "message": message })
+            }
+        };
+        if let Err(e) = log.flush(&ctx.api, claim).await {
+            tracing::warn!("job {}: the log's end was not sent: {e}", claim.job.id);
+        }
+        match ctx.api.finish(claim, &body).await {
+            Ok(url) => {
+                tracing::info!("job {} finished{}", claim.job.id, url.map(|u| format!(": {u}")).unwrap_or_default())
+            }
+            Err(e) => tracing::error!("job {}: reporting its end failed: {e}", claim.job.id),
+        }
+        let left = ctx.sandbox.remove_job_containers(&claim.job.id).await;
+        if left > 0 {
+            tracing::warn!("job {}: removed {left} containers it left behind", claim.job.id);
+        }
+        if let Err(e) = std::fs::remove_dir_all(&dir) {
+            tracing::warn!("job {}: {}: {e}", claim.job.id, dir.display());
+        }
+    }
+}
+
+/// The runner's identity: kept in the work directory, or bought with the registration token.
+async fn identity(config: &RunnerConfig, api: &Api, machine: &Machine) -> anyhow::Result<RunnerCredentials> {
+    let path = config.work_dir.join("runner.json");
+    if let Ok(text) = std::fs::read_to_string(&path) {
+        return serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()));
+    }
+    let Some(token) = &config.registration_token else {
+        anyhow::bail!(
+            "{} does not exist: give the server's runner registration token (--registration-token or \
+             FBKSD_REGISTRATION_TOKEN) to register this runner",
+            path.display()
+        );
+    };
+    let machine = serde_json::to_value(machine)?;
+    let credentials = api.register(token, &config.runner_name(), &machine).await?;
+    write_private(&path, &serde_json::to_vec_pretty(&credentials)?)?;
+    tracing::info!("registered as runner {}", credentials.id);
+    Ok(credentials)
+}
+
+fn write_private(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let tmp = path.with_extension("tmp");
+    let mut f = std::fs::File::options().write(true).create(true).truncate(true).mode(0o600).open(&tmp)?;
+    f.write_all(bytes)?;
+    f.sync_all()?;
+    std::fs::rename(tmp, path)
+}
+
+/// Rendezvous directories go to memory (`/dev/shm`) when it is writable,
+/// in a directory of this runner's own, wiped at start.
+fn rendezvous_parent(runner_id: &str, work_dir: &Path) -> PathBuf {
+    let shm = Path::new("/dev/shm");
+    let probe = shm.join(format!(".fbksd-ci-probe-{}", std::process::id()));
+    if std::fs::write(&probe, b"").is_ok() {
+        let _ = std::fs::remove_file(&probe);
+        return shm.join(format!("fbksd-ci-{runner_id}"));
+    }
+    work_dir.join("rendezvous")
+}

@@ -1,0 +1,117 @@
+//! The whole flow with real Docker, real git, the real server and the real
+//! `fbksd-ci`: push the C++ box filter → build job succeeds → FBKSD_RUN →
+//! private results URL in the job log → metrics for every scene and spp →
+//! FBKSD_PUBLISH → the public leaderboard lists it; then the same for the
+//! Python box filter. Prints the push-to-results times (see the README).
+
+mod common;
+
+use common::*;
+use reqwest::Method;
+use std::time::{Duration, Instant};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn box_filters_go_from_push_to_the_leaderboard() {
+    images();
+    references(CI_SCENES);
+    let server = spawn(Db::Sqlite).await;
+    let work = tempfile::tempdir().unwrap();
+    let options = RunnerOptions { scenes: CI_SCENES, spp: "1,4", ..Default::default() };
+    let runner = RunnerProcess::start(&server.url, &work.path().join("runner"), &options);
+    let ada = server.user("ada@example.org").await;
+
+    for name in ["box-filter-cpp", "box-filter-python"] {
+        server.create_project(&ada, name, "private").await;
+        let repo = technique_repository(name);
+        let url = server.clone_url(name, &ada.token);
+
+        // A push builds it in the sandbox.
+        let pushed_at = Instant::now();
+        let (pushed, output) = push(repo.path(), &url, &[]);
+        assert!(pushed, "{output}");
+        let build = newest_job(&server, &ada, name, "build").await;
+        let job = finished_job(&server, &ada, &build, Duration::from_secs(600)).await;
+        let log = log_text(&server, &ada, &build).await;
+        assert_eq!(job["state"], "succeeded", "{name} build: {job}\n{log}\nrunner:\n{}", runner.output());
+        assert!(log.contains("build succeeded"), "{log}");
+        let build_time = pushed_at.elapsed();
+
+        // FBKSD_RUN benchmarks it; the log ends with the private URL.
+        commit_all(repo.path(), "run");
+        let pushed_at = Instant::now();
+        let (pushed, output) = push(repo.path(), &url, &["FBKSD_RUN"]);
+        assert!(pushed, "{output}");
+        let bench = newest_job(&server, &ada, name, "benchmark").await;
+        let job = finished_job(&server, &ada, &bench, Duration::from_secs(900)).await;
+        let log = log_text(&server, &ada, &bench).await;
+        assert_eq!(job["state"], "succeeded", "{name} benchmark: {job}\n{log}\nrunner:\n{}", runner.output());
+        let benchmark_time = pushed_at.elapsed();
+        eprintln!(
+            "FIGURE {name}: push to successful build {:.1} s; push (FBKSD_RUN) to private results {:.1} s",
+            build_time.as_secs_f64(),
+            benchmark_time.as_secs_f64()
+        );
+        for line in log.lines().filter(|l| l.contains("uploaded in") || l.contains(" spp: ")) {
+            eprintln!("FIGURE {name}: {line}");
+        }
+        let private = log
+            .lines()
+            .find_map(|l| l.split("private results: ").nth(1))
+            .unwrap_or_else(|| panic!("no private results URL in the log:\n{log}"))
+            .trim()
+            .to_string();
+        let uuid = private.rsplit('/').next().unwrap().to_string();
+
+        // Metrics for every scene and spp, with provenance.
+        let (status, set) =
+            json_of(ada.api(Method::GET, format!("{}/api/v1/results/{uuid}", server.url)).send().await.unwrap()).await;
+        assert_eq!(status, 200, "{set}");
+        let runs = set["runs"].as_array().unwrap_or_else(|| panic!("no runs in {set}"));
+        for scene in ["sphere", "fireflies", "cornell-box-small"] {
+            for spp in [1, 4] {
+                let run = runs
+                    .iter()
+                    .find(|r| r["scene"] == scene && r["spp"] == spp)
+                    .unwrap_or_else(|| panic!("no run of {scene} at {spp} spp in {set}"));
+                assert_eq!(run["status"], "ok", "{run}");
+                for metric in ["MSE", "SSIM"] {
+                    let value = run["metrics"][metric].as_f64();
+                    assert!(value.is_some_and(f64::is_finite), "{scene} {spp} spp: {metric} is {value:?}: {run}");
+                }
+            }
+        }
+        let provenance = &set["result"]["provenance"];
+        assert!(provenance["image_digest"].as_str().is_some_and(|d| d.starts_with("sha256:")), "{set}");
+        assert!(provenance["machine"]["cores"].as_u64().is_some_and(|n| n >= 1), "{provenance}");
+        assert!(provenance["machine"]["cpu_model"].as_str().is_some_and(|m| !m.is_empty()), "{provenance}");
+        // More samples, less error: the numbers are real.
+        let mse = |spp: u64| {
+            runs.iter().find(|r| r["scene"] == "fireflies" && r["spp"] == spp).unwrap()["metrics"]["MSE"]
+                .as_f64()
+                .unwrap()
+        };
+        assert!(mse(4) < mse(1), "MSE at 4 spp {} is not below MSE at 1 spp {}", mse(4), mse(1));
+
+        // The private page shows the set to its owner, and only to its owner.
+        let page = ada.browser.get(&private).send().await.unwrap();
+        assert_eq!(page.status(), 200);
+        let page = page.text().await.unwrap();
+        for scene in ["sphere", "fireflies", "cornell-box-small"] {
+            assert!(page.contains(scene), "the private page does not show {scene}");
+        }
+        assert_eq!(reqwest::get(&private).await.unwrap().status(), 404);
+
+        // FBKSD_PUBLISH puts it on the public leaderboard.
+        commit_all(repo.path(), "publish");
+        let (pushed, output) = push(repo.path(), &url, &[&format!("FBKSD_PUBLISH={uuid}")]);
+        assert!(pushed, "{output}");
+        let board = reqwest::get(format!("{}/results/", server.url)).await.unwrap().text().await.unwrap();
+        assert!(board.contains(name), "the leaderboard does not list {name}");
+    }
+
+    // Nothing is left behind.
+    let id = runner.id().unwrap();
+    assert_eq!(containers_labelled("org.fbksd.ci.runner", &id), Vec::<String>::new());
+    let jobs_dir = runner.work.join("jobs");
+    assert_eq!(std::fs::read_dir(&jobs_dir).unwrap().count(), 0, "job files left in {}", jobs_dir.display());
+}

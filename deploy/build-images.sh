@@ -1,0 +1,94 @@
+#!/usr/bin/env bash
+# Builds the images fbksd-ci runs jobs in, with no registry:
+#   base      Debian 12 (minbase) from this machine's Debian apt sources:
+#             mmdebstrap, then docker import (only when it is not there yet)
+#   cpp       base + gcc, CMake and the FBKSD C/C++ SDK
+#   python    base + Python 3, numpy and the FBKSD Python SDK
+#   renderer  base + the built-in renderers and the scene files (no references)
+# Each tag is a hash of the image's content (its Dockerfile, the files it
+# copies and its base), so an unchanged image is never rebuilt. The
+# manifest (JSON) names the four tags; fbksd-ci reads it (--images).
+#
+#   bash deploy/build-images.sh [--bin-dir DIR] [--manifest FILE]
+#
+# Without --bin-dir the release binaries are built first (target/release).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin_dir=""
+manifest=fbksd-data/images.json
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --bin-dir) bin_dir=$2; shift 2 ;;
+        --manifest) manifest=$2; shift 2 ;;
+        *) echo "usage: build-images.sh [--bin-dir DIR] [--manifest FILE]" >&2; exit 2 ;;
+    esac
+done
+say() { echo "build-images: $*" >&2; }
+if [ -z "$bin_dir" ]; then
+    cargo build --release --locked -p fbksd-capi -p fbksd-python -p fbksd-procedural -p fbksd-embree
+    bin_dir=target/release
+fi
+for f in libfbksd.so libfbksd.a lib_native.so fbksd-procedural fbksd-embree; do
+    [ -f "$bin_dir/$f" ] || { say "$bin_dir/$f is missing: build the workspace first (cargo build)"; exit 1; }
+done
+docker info >/dev/null 2>&1 || { say "Docker does not answer: start it (and run this as a user who may use it)"; exit 1; }
+
+# --- base: Debian's own apt sources of this machine (not third-party ones) --------------
+sources=()
+for f in /etc/apt/sources.list /etc/apt/sources.list.d/*.list /etc/apt/sources.list.d/*.sources; do
+    [ -s "$f" ] && grep -qE '^[^#]*/debian(-security)?/?([[:space:]]|$)' "$f" && sources+=("$f")
+done
+[ ${#sources[@]} -gt 0 ] || { say "no Debian apt source found in /etc/apt"; exit 1; }
+base_hash=$(cat "${sources[@]}" | sha256sum | cut -c1-16)
+base=fbksd-base:bookworm-$base_hash
+if ! docker image inspect "$base" >/dev/null 2>&1; then
+    command -v mmdebstrap >/dev/null || { say "mmdebstrap is missing: apt-get install mmdebstrap (deploy/setup.sh does)"; exit 1; }
+    say "building $base with mmdebstrap from ${sources[*]}"
+    mmdebstrap --quiet --variant=minbase --mode=root bookworm - "${sources[@]}" | docker import - "$base" >/dev/null
+fi
+base_id=$(docker image inspect --format '{{.Id}}' "$base")
+
+# --- the images on top of it ---------------------------------------------------------------
+stage=$(mktemp -d)
+trap 'rm -rf "$stage"' EXIT
+
+stage_cpp() {
+    bash deploy/install-sdk.sh "$1/sdk" "$bin_dir" >/dev/null
+}
+stage_python() {
+    mkdir -p "$1/fbksd"
+    cp sdk/python/python/fbksd/*.py sdk/python/python/fbksd/*.pyi sdk/python/python/fbksd/py.typed "$1/fbksd/"
+    cp "$bin_dir/lib_native.so" "$1/fbksd/_native.so"
+}
+stage_renderer() {
+    mkdir -p "$1/bin" "$1/scenes"
+    cp "$bin_dir/fbksd-procedural" "$bin_dir/fbksd-embree" "$1/bin/"
+    (cd scenes && find . -type f ! -name 'reference.*' ! -name '*.py' ! -name '*.md' -print0 \
+        | xargs -0 cp --parents -t "$1/scenes")
+}
+
+declare -A tags
+for name in cpp python renderer; do
+    ctx="$stage/$name"
+    mkdir -p "$ctx"
+    cp "deploy/images/$name/Dockerfile" "$ctx/"
+    "stage_$name" "$ctx"
+    hash=$( (echo "$base_id"; cd "$ctx" && find . -type f -print0 | sort -z | xargs -0 sha256sum) | sha256sum | cut -c1-16)
+    tag=fbksd-$name:$hash
+    if ! docker image inspect "$tag" >/dev/null 2>&1; then
+        say "building $tag"
+        if ! docker build --quiet --network host --build-arg "BASE=$base" -t "$tag" "$ctx" >"$stage/$name.log" 2>&1; then
+            cat "$stage/$name.log" >&2
+            say "building $tag failed"
+            exit 1
+        fi
+    fi
+    tags[$name]=$tag
+done
+
+mkdir -p "$(dirname "$manifest")"
+cat > "$manifest.tmp" <<JSON
+{"base": "$base", "cpp": "${tags[cpp]}", "python": "${tags[python]}", "renderer": "${tags[renderer]}"}
+JSON
+mv "$manifest.tmp" "$manifest"
+say "images ready: $base ${tags[cpp]} ${tags[python]} ${tags[renderer]} (manifest: $manifest)"
