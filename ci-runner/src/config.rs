@@ -42,7 +42,7 @@ pub struct RunnerConfig {
     #[arg(long, env = "FBKSD_CI_SPP", value_delimiter = ',')]
     pub spp: Vec<u64>,
 
-    /// Cores every container is pinned to, e.g. "0-1" (default: all).
+    /// Cores every container is pinned to, e.g. "0-1" (default: all of this machine's).
     #[arg(long, env = "FBKSD_CI_CPUS")]
     pub cpus: Option<String>,
 

@@ -159,23 +159,32 @@ pub async fn run(
 
     let results = dir.join("results");
     let benchmark_started = Instant::now();
-    benchmark(ctx, claim, &info, &install, &results, log, cancelled).await?;
+    let runs_time = benchmark(ctx, claim, &info, &install, &results, log, cancelled).await?;
     let benchmark_time = benchmark_started.elapsed();
+    let metrics_started = Instant::now();
+    let (upload, files, message) = collect(ctx, claim, &info, &results).await?;
+    let metrics_time = metrics_started.elapsed();
     let upload_started = Instant::now();
-    let (upload, files, summary) = collect(ctx, claim, &info, &results).await?;
+    let mut bytes_sent = 0;
     for (name, path) in &files {
         let bytes = std::fs::read(path).map_err(|e| Failure::infrastructure(format!("{}: {e}", path.display())))?;
+        bytes_sent += bytes.len();
         ctx.api.put_file(claim, name, bytes).await?;
     }
     ctx.api.put_results(claim, &upload).await?;
+    // The runner's own cost, for its operators: everything but the runs themselves.
     log.line(format!(
-        "[fbksd-ci] {} files uploaded in {:.1} s; benchmark {:.1} s, job {:.1} s",
-        files.len(),
-        upload_started.elapsed().as_secs_f64(),
+        "[fbksd-ci] times: job {:.1} s; benchmark {:.1} s, of which the runs themselves {:.1} s; metrics {:.1} s; \
+         upload of {} files ({:.1} MB) {:.1} s",
+        started.elapsed().as_secs_f64(),
         benchmark_time.as_secs_f64(),
-        started.elapsed().as_secs_f64()
+        runs_time.as_secs_f64(),
+        metrics_time.as_secs_f64(),
+        files.len(),
+        bytes_sent as f64 / 1e6,
+        upload_started.elapsed().as_secs_f64(),
     ));
-    summary
+    Ok(message)
 }
 
 /// Clones the repository at the pinned commit into `src`.
@@ -359,7 +368,8 @@ async fn build(
     Ok(install)
 }
 
-/// Runs the first version of the technique on every scene of the pool.
+/// Runs the first version of the technique on every scene of the pool;
+/// returns the runs' own time (technique start to result, summed).
 async fn benchmark(
     ctx: &JobContext,
     claim: &Claim,
@@ -368,7 +378,7 @@ async fn benchmark(
     results: &Path,
     log: &JobLog,
     cancelled: &Cancelled,
-) -> Result<(), Failure> {
+) -> Result<Duration, Failure> {
     let version = &info.versions[0];
     if info.versions.len() > 1 {
         log.line(format!("[fbksd-ci] benchmarking version {:?} (the first one in info.json)", version.name));
@@ -451,11 +461,11 @@ async fn benchmark(
             ));
         }
     }
-    Ok(())
+    Ok(records.iter().map(|r| Duration::from_secs_f64(r.times.wall_ms / 1e3)).sum())
 }
 
 /// The upload, the files to send with it, and the success message.
-type Collected = (serde_json::Value, Vec<(String, PathBuf)>, Result<String, Failure>);
+type Collected = (serde_json::Value, Vec<(String, PathBuf)>, String);
 
 /// Computes the metrics and gathers what is uploaded.
 async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results: &Path) -> Result<Collected, Failure> {
@@ -511,7 +521,7 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
             "fbksd_ci": env!("CARGO_PKG_VERSION"),
         },
     });
-    Ok((upload, files, Ok(message)))
+    Ok((upload, files, message))
 }
 
 /// Every file under `dir`, named relative to `root`.

@@ -74,7 +74,8 @@ impl Runner {
         let credentials = identity(&config, &api, &machine).await?;
         let docker = wait_for_docker().await;
         let images = Images::resolve(&config.images, &docker).await?;
-        let sandbox = Sandbox::new(docker, &credentials.id, config.cpus.clone(), config.pids, config.tmpfs_mib);
+        // Pinned even when no cores are named: to all of them, as recorded in every result.
+        let sandbox = Sandbox::new(docker, &credentials.id, machine.cpuset.clone(), config.pids, config.tmpfs_mib);
         let rendezvous_parent = rendezvous_parent(&credentials.id, &config.work_dir);
         let left = sandbox.remove_runner_containers().await;
         if left > 0 {

@@ -80,14 +80,14 @@ pub struct Sandbox {
     /// The Docker engine.
     pub docker: Docker,
     runner_id: String,
-    cpuset: Option<String>,
+    cpuset: String,
     pids: i64,
     tmpfs_mib: u64,
 }
 
 impl Sandbox {
-    /// A sandbox for the runner `runner_id`, pinned to `cpuset` (all cores when `None`).
-    pub fn new(docker: Docker, runner_id: &str, cpuset: Option<String>, pids: i64, tmpfs_mib: u64) -> Sandbox {
+    /// A sandbox for the runner `runner_id`, its containers pinned to `cpuset` (`0-3`).
+    pub fn new(docker: Docker, runner_id: &str, cpuset: String, pids: i64, tmpfs_mib: u64) -> Sandbox {
         Sandbox { docker, runner_id: runner_id.to_string(), cpuset, pids, tmpfs_mib }
     }
 
@@ -120,7 +120,7 @@ impl Sandbox {
             memory: Some(memory),
             memory_swap: Some(memory),
             pids_limit: Some(self.pids),
-            cpuset_cpus: self.cpuset.clone(),
+            cpuset_cpus: Some(self.cpuset.clone()),
             ulimits: Some(vec![ulimit("fsize", MAX_FILE_BYTES), ulimit("core", 0), ulimit("nofile", 4096)]),
             ipc_mode: Some("private".into()),
             binds: Some(

@@ -51,7 +51,7 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
             build_time.as_secs_f64(),
             benchmark_time.as_secs_f64()
         );
-        for line in log.lines().filter(|l| l.contains("uploaded in") || l.contains(" spp: ")) {
+        for line in log.lines().filter(|l| l.contains("times: ") || l.contains(" spp: ")) {
             eprintln!("FIGURE {name}: {line}");
         }
         let private = log
