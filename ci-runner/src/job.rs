@@ -230,23 +230,9 @@ fn check(src: &Path) -> Result<TechniqueInfo, Failure> {
         Failure::new(FailureReason::BuildFailed, format!("info.json: {e}: add it at the repository's root"))
     })?;
     let mut files = Vec::new();
-    list_files(src, src, &mut files);
+    files_under(src, src, &mut files);
+    let files: Vec<String> = files.into_iter().map(|(name, _)| name).collect();
     TechniqueInfo::parse(&text, &files).map_err(|e| Failure::new(FailureReason::BuildFailed, e))
-}
-
-fn list_files(root: &Path, dir: &Path, out: &mut Vec<String>) {
-    let Ok(entries) = std::fs::read_dir(dir) else { return };
-    for entry in entries.flatten() {
-        let path = entry.path();
-        if entry.file_name() == ".git" {
-            continue;
-        }
-        match entry.file_type() {
-            Ok(t) if t.is_dir() => list_files(root, &path, out),
-            Ok(_) => out.push(path.strip_prefix(root).unwrap_or(&path).to_string_lossy().into_owned()),
-            Err(_) => {}
-        }
-    }
 }
 
 /// Where a built technique's files are, and how its container sees them.
@@ -281,7 +267,7 @@ async fn build(
             let spec = ContainerSpec {
                 image,
                 cmd: vec!["sh".into(), "-c".into(), script],
-                env: vec!["HOME=/tmp".into()],
+                env: Vec::new(), // HOME=/tmp is set by the image
                 mounts: vec![
                     Mount { host: src.to_path_buf(), container: "/src".into(), writable: false },
                     Mount { host: build.clone(), container: "/build".into(), writable: true },
@@ -302,7 +288,7 @@ async fn build(
             let spec = ContainerSpec {
                 image,
                 cmd,
-                env: vec!["HOME=/tmp".into(), "PYTHONDONTWRITEBYTECODE=1".into()],
+                env: Vec::new(), // HOME and PYTHONDONTWRITEBYTECODE are set by the image
                 mounts: vec![Mount { host: src.to_path_buf(), container: TECHNIQUE_MOUNT.into(), writable: false }],
                 working_dir: Some(TECHNIQUE_MOUNT.into()),
                 memory_mib: ctx.config.memory_mib,
@@ -484,8 +470,8 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
         .map_err(|e| Failure::infrastructure(format!("the metrics: {e}")))?
     };
     let mut files = Vec::new();
-    collect_files(results, &results.join(path_safe_name(&info.short_name)), &mut files);
-    collect_files(results, &results.join("renderer-logs"), &mut files);
+    files_under(results, &results.join(path_safe_name(&info.short_name)), &mut files);
+    files_under(results, &results.join("renderer-logs"), &mut files);
     let failed = index.runs.iter().filter(|r| r.status != RunStatus::Ok).count();
     let message = if failed == 0 {
         format!("{} runs on {} scenes", index.runs.len(), ctx.scenes.len())
@@ -524,16 +510,19 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
     Ok((upload, files, message))
 }
 
-/// Every file under `dir`, named relative to `root`.
-fn collect_files(root: &Path, dir: &Path, out: &mut Vec<(String, PathBuf)>) {
+/// Every file under `dir` (sorted, `.git` left out), named relative to
+/// `root`. Symbolic links are listed, never followed: the directory may be
+/// a user's repository.
+fn files_under(root: &Path, dir: &Path, out: &mut Vec<(String, PathBuf)>) {
     let Ok(entries) = std::fs::read_dir(dir) else { return };
-    let mut entries: Vec<_> = entries.flatten().map(|e| e.path()).collect();
-    entries.sort();
-    for path in entries {
-        if path.is_dir() {
-            collect_files(root, &path, out);
-        } else if let Ok(rel) = path.strip_prefix(root) {
-            out.push((rel.to_string_lossy().into_owned(), path.clone()));
+    let mut entries: Vec<_> = entries.flatten().filter(|e| e.file_name() != ".git").collect();
+    entries.sort_by_key(|e| e.file_name());
+    for entry in entries {
+        let path = entry.path();
+        match entry.file_type() {
+            Ok(t) if t.is_dir() => files_under(root, &path, out),
+            Ok(_) => out.push((path.strip_prefix(root).unwrap_or(&path).to_string_lossy().into_owned(), path)),
+            Err(_) => {}
         }
     }
 }

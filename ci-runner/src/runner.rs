@@ -76,7 +76,7 @@ impl Runner {
         let images = Images::resolve(&config.images, &docker).await?;
         // Pinned even when no cores are named: to all of them, as recorded in every result.
         let sandbox = Sandbox::new(docker, &credentials.id, machine.cpuset.clone(), config.pids, config.tmpfs_mib);
-        let rendezvous_parent = rendezvous_parent(&credentials.id, &config.work_dir);
+        let rendezvous_parent = rendezvous_parent(&credentials.id);
         let left = sandbox.remove_runner_containers().await;
         if left > 0 {
             tracing::warn!("removed {left} containers a previous run of this runner left behind");
@@ -239,14 +239,8 @@ fn write_private(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     std::fs::rename(tmp, path)
 }
 
-/// Rendezvous directories go to memory (`/dev/shm`) when it is writable,
-/// in a directory of this runner's own, wiped at start.
-fn rendezvous_parent(runner_id: &str, work_dir: &Path) -> PathBuf {
-    let shm = Path::new("/dev/shm");
-    let probe = shm.join(format!(".fbksd-ci-probe-{}", std::process::id()));
-    if std::fs::write(&probe, b"").is_ok() {
-        let _ = std::fs::remove_file(&probe);
-        return shm.join(format!("fbksd-ci-{runner_id}"));
-    }
-    work_dir.join("rendezvous")
+/// This runner's own directory for rendezvous directories, wiped at start:
+/// under the manager's usual parent (`/dev/shm` when writable, memory-backed).
+fn rendezvous_parent(runner_id: &str) -> PathBuf {
+    fbksd_core::rendezvous::default_parent().join(format!("fbksd-ci-{runner_id}"))
 }

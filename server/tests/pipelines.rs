@@ -5,23 +5,9 @@
 
 mod common;
 
-use common::{json_of, push, spawn, spawn_with, technique_repository, Db, FakeRunner};
+use common::{json_of, log_text, project_jobs, push, spawn, spawn_with, technique_repository, Db, FakeRunner};
 use reqwest::Method;
-use serde_json::{json, Value};
-
-async fn project_jobs(server: &common::TestServer, user: &common::TestUser, name: &str) -> Vec<Value> {
-    let (status, body) =
-        json_of(user.api(Method::GET, format!("{}/api/v1/projects/{name}", server.url)).send().await.unwrap()).await;
-    assert_eq!(status, 200, "{body}");
-    body["jobs"].as_array().unwrap().clone()
-}
-
-async fn log_text(server: &common::TestServer, user: &common::TestUser, job: &str) -> String {
-    let (status, body) =
-        json_of(user.api(Method::GET, format!("{}/api/v1/jobs/{job}/log", server.url)).send().await.unwrap()).await;
-    assert_eq!(status, 200, "{body}");
-    body["chunks"].as_array().unwrap().iter().map(|c| c["text"].as_str().unwrap()).collect()
-}
+use serde_json::json;
 
 on_both_databases!(push_build_run_publish_and_the_leaderboard, |db: Db| async move {
     let server = spawn(db).await;

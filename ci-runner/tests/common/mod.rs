@@ -191,24 +191,6 @@ pub async fn job(server: &TestServer, user: &TestUser, id: &str) -> serde_json::
     body
 }
 
-/// The jobs of a project, newest first as the API lists them.
-pub async fn project_jobs(server: &TestServer, user: &TestUser, name: &str) -> Vec<serde_json::Value> {
-    let (status, body) =
-        json_of(user.api(reqwest::Method::GET, format!("{}/api/v1/projects/{name}", server.url)).send().await.unwrap())
-            .await;
-    assert_eq!(status, 200, "{body}");
-    body["jobs"].as_array().unwrap().clone()
-}
-
-/// A job's whole log.
-pub async fn log_text(server: &TestServer, user: &TestUser, id: &str) -> String {
-    let (status, body) =
-        json_of(user.api(reqwest::Method::GET, format!("{}/api/v1/jobs/{id}/log", server.url)).send().await.unwrap())
-            .await;
-    assert_eq!(status, 200, "{body}");
-    body["chunks"].as_array().unwrap().iter().map(|c| c["text"].as_str().unwrap()).collect()
-}
-
 /// Waits until a job has ended; the job.
 pub async fn finished_job(server: &TestServer, user: &TestUser, id: &str, within: Duration) -> serde_json::Value {
     let deadline = Instant::now() + within;

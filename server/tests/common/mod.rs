@@ -211,6 +211,22 @@ pub async fn json_of(response: reqwest::Response) -> (u16, serde_json::Value) {
     (status, response.json().await.unwrap_or_default())
 }
 
+/// The jobs of a project, as its owner sees them in the API.
+pub async fn project_jobs(server: &TestServer, user: &TestUser, name: &str) -> Vec<serde_json::Value> {
+    let response = user.api(reqwest::Method::GET, format!("{}/api/v1/projects/{name}", server.url)).send().await;
+    let (status, body) = json_of(response.unwrap()).await;
+    assert_eq!(status, 200, "{body}");
+    body["jobs"].as_array().unwrap().clone()
+}
+
+/// A job's whole log.
+pub async fn log_text(server: &TestServer, user: &TestUser, job: &str) -> String {
+    let response = user.api(reqwest::Method::GET, format!("{}/api/v1/jobs/{job}/log", server.url)).send().await;
+    let (status, body) = json_of(response.unwrap()).await;
+    assert_eq!(status, 200, "{body}");
+    body["chunks"].as_array().unwrap().iter().map(|c| c["text"].as_str().unwrap()).collect()
+}
+
 impl TestUser {
     /// An API request with the user's access token.
     pub fn api(&self, method: reqwest::Method, url: String) -> reqwest::RequestBuilder {
