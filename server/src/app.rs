@@ -42,13 +42,19 @@ pub struct Application {
     admin: Option<(String, String)>,
     registration_token: Option<String>,
     url: String,
+    config: Arc<Config>,
 }
 
 impl Application {
     /// Opens the data directory, database and mail transport, creates the
     /// first administrator if there is none, and binds the listener.
-    pub async fn build(config: Config) -> anyhow::Result<Application> {
+    pub async fn build(mut config: Config) -> anyhow::Result<Application> {
         std::fs::create_dir_all(&config.data_dir)
+            .map_err(|e| anyhow::anyhow!("data directory {}: {e}", config.data_dir.display()))?;
+        // Resolved once: git configuration, hooks, child processes and the
+        // database see this path from other working directories (a bare
+        // repository resolves a relative `core.hooksPath` inside itself).
+        config.data_dir = std::fs::canonicalize(&config.data_dir)
             .map_err(|e| anyhow::anyhow!("data directory {}: {e}", config.data_dir.display()))?;
         let pool = crate::db::connect(&config.database_url()).await.map_err(|e| anyhow::anyhow!("database: {e}"))?;
         let mailer = Mailer::from_config(&config)?;
@@ -75,8 +81,9 @@ impl Application {
 
         let registration_token =
             crate::runners::ensure_registration_token(&pool, &config.runner_registration_token.0).await?;
-        let git = crate::git::GitHost::open(&config.data_dir, config.max_push_bytes)
-            .map_err(|e| anyhow::anyhow!("git repositories in {}: {e}", config.data_dir.display()))?;
+        let git =
+            crate::git::GitHost::open(&config.data_dir, config.max_push_bytes, &crate::pipelines::pre_receive_hook())
+                .map_err(|e| anyhow::anyhow!("git repositories in {}: {e}", config.data_dir.display()))?;
         let postgres = config.database_url().starts_with("postgres");
 
         // Leases expire even when no runner polls.
@@ -91,22 +98,28 @@ impl Application {
         });
 
         let url = public_url.clone();
+        let config = Arc::new(config);
         let state = AppState {
             pool,
             mailer,
-            config: Arc::new(config),
+            config: config.clone(),
             public_url,
             git,
             postgres,
             job_queued: Arc::new(tokio::sync::Notify::new()),
             boards: Default::default(),
         };
-        Ok(Application { listener, router: crate::routes::router(state), admin, registration_token, url })
+        Ok(Application { listener, router: crate::routes::router(state), admin, registration_token, url, config })
     }
 
     /// The URL users reach the server at (the configured public URL, or the bound address).
     pub fn url(&self) -> &str {
         &self.url
+    }
+
+    /// The configuration in force: the data directory is absolute.
+    pub fn config(&self) -> &Config {
+        &self.config
     }
 
     /// The port the server listens on.

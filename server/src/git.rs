@@ -3,13 +3,18 @@
 //! [`GitHost::serve`] is the CGI bridge) and read with the real `git`.
 //!
 //! Pushes reach the server through two hooks every repository shares
-//! (`core.hooksPath`):
-//! - `pre-receive` refuses unknown push options (`git push -o …`) before
+//! (`core.hooksPath`, an absolute path):
+//! - `pre-receive` checks the push options (`git push -o …`) before
 //!   anything is written, so a typo never lands a commit without its
-//!   pipeline;
+//!   pipeline; its script comes from the owner of the options' rules
+//!   ([`crate::pipelines::pre_receive_hook`]);
 //! - `post-receive` writes the ref updates and the push options to the file
 //!   named by `FBKSD_PUSH_RECORD`, which the bridge sets per request and
 //!   reads when `git http-backend` has finished ([`PushRecord`]).
+//!
+//! What a push started is told to the pusher as `remote:` lines: the bridge
+//! adds them to git's answer on the side-band progress channel
+//! ([`Pushed::respond`]).
 //!
 //! Size: git itself refuses packs above `receive.maxInputSize` with a
 //! message the client prints; the bridge also caps the request body.
@@ -21,29 +26,6 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::process::Command;
-
-/// The hooks every repository runs (see the module documentation).
-const PRE_RECEIVE: &str = r#"#!/bin/sh
-# FBKSD: refuse unknown push options before anything is written.
-i=0
-while [ "$i" -lt "${GIT_PUSH_OPTION_COUNT:-0}" ]; do
-    eval "option=\$GIT_PUSH_OPTION_$i"
-    case "$option" in
-        FBKSD_RUN|FBKSD_RUN=*) ;;
-        FBKSD_PUBLISH=*)
-            key="${option#FBKSD_PUBLISH=}"
-            if ! printf '%s' "$key" | grep -Eqi '^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$'; then
-                echo "FBKSD: FBKSD_PUBLISH needs the UUID of one of your results (the key in its /results/<uuid> URL), not '$key'"
-                exit 1
-            fi ;;
-        *)
-            echo "FBKSD: unknown push option '$option': the server knows FBKSD_RUN and FBKSD_PUBLISH=<uuid>"
-            exit 1 ;;
-    esac
-    i=$((i + 1))
-done
-exit 0
-"#;
 
 const POST_RECEIVE: &str = r#"#!/bin/sh
 # FBKSD: tell the server what was pushed (read when git http-backend ends).
@@ -98,11 +80,70 @@ impl PushRecord {
 }
 
 /// What a request to the bridge produced.
-pub struct Served {
-    /// The HTTP answer for git.
-    pub response: Response,
-    /// For a push that `git http-backend` accepted: what it did.
-    pub push: Option<PushRecord>,
+pub enum Served {
+    /// A fetch, or a push that did not land: the answer for git.
+    Answered(Response),
+    /// A push that landed: what it did, and git's answer still to be sent.
+    Pushed(Pushed),
+}
+
+/// A push that `git http-backend` accepted, before its answer is sent.
+pub struct Pushed {
+    /// What the push did.
+    pub record: PushRecord,
+    status: StatusCode,
+    headers: HeaderMap,
+    output: Vec<u8>,
+}
+
+impl Pushed {
+    /// git's answer, with `messages` (one line each) printed by the pusher's
+    /// git as `remote:` lines.
+    pub fn respond(self, messages: &[String]) -> Response {
+        let mut response = Response::new(Body::from(with_remote_messages(self.output, messages)));
+        *response.status_mut() = self.status;
+        *response.headers_mut() = self.headers;
+        response
+    }
+}
+
+/// Adds `messages` to a `git-receive-pack` answer as side-band channel 2
+/// (progress) packets before its final flush packet, where git prints them
+/// as `remote:` lines. An answer without side-band (clients older than
+/// git 1.6) is returned as it was: it has no place for them.
+fn with_remote_messages(output: Vec<u8>, messages: &[String]) -> Vec<u8> {
+    // Walk the pkt-lines: 4 hex digits of length (header included), "0000" a flush.
+    let (mut at, mut side_band) = (0, None);
+    while at + 4 <= output.len() {
+        let Some(length) =
+            std::str::from_utf8(&output[at..at + 4]).ok().and_then(|h| usize::from_str_radix(h, 16).ok())
+        else {
+            return output;
+        };
+        if length == 0 && at + 4 == output.len() {
+            break;
+        }
+        if length != 0 && (length < 5 || at + length > output.len()) {
+            return output;
+        }
+        side_band.get_or_insert(length != 0 && matches!(output[at + 4], 1..=3));
+        at += length.max(4);
+    }
+    if side_band != Some(true) || at + 4 != output.len() {
+        return output;
+    }
+    let mut answer = output[..at].to_vec();
+    for message in messages {
+        for line in message.lines() {
+            let line = &line[..line.len().min(60_000)];
+            answer.extend(format!("{:04x}", 4 + 1 + line.len() + 1).as_bytes());
+            answer.push(2);
+            answer.extend(line.as_bytes());
+            answer.push(b'\n');
+        }
+    }
+    answer.extend(b"0000");
+    answer
 }
 
 /// The parts of a smart-HTTP request the CGI bridge passes on.
@@ -134,17 +175,40 @@ pub struct GitError {
 }
 
 impl GitHost {
-    /// Repositories under `data_dir/git`; writes the shared hooks.
-    pub fn open(data_dir: &Path, max_push_bytes: u64) -> std::io::Result<GitHost> {
+    /// Repositories under `data_dir/git` (an absolute path); writes the
+    /// shared hooks (`pre_receive` is its script) and points every existing
+    /// repository at them, which repairs repositories an older server gave a
+    /// relative hooks path.
+    pub fn open(data_dir: &Path, max_push_bytes: u64, pre_receive: &str) -> std::io::Result<GitHost> {
+        if !data_dir.is_absolute() {
+            return Err(std::io::Error::other(format!(
+                "{} is relative: git resolves it inside each repository",
+                data_dir.display()
+            )));
+        }
         let root = data_dir.join("git");
         let hooks = data_dir.join("git-hooks");
         std::fs::create_dir_all(&root)?;
         std::fs::create_dir_all(&hooks)?;
-        for (name, text) in [("pre-receive", PRE_RECEIVE), ("post-receive", POST_RECEIVE)] {
+        for (name, text) in [("pre-receive", pre_receive), ("post-receive", POST_RECEIVE)] {
             let path = hooks.join(name);
             std::fs::write(&path, text)?;
             use std::os::unix::fs::PermissionsExt;
             std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))?;
+        }
+        for entry in std::fs::read_dir(&root)? {
+            let repository = entry?.path();
+            if repository.extension().is_some_and(|e| e == "git") {
+                let set = std::process::Command::new("git")
+                    .arg("-C")
+                    .arg(&repository)
+                    .args(["config", "core.hooksPath"])
+                    .arg(&hooks)
+                    .status()?;
+                if !set.success() {
+                    tracing::warn!("{}: cannot set core.hooksPath", repository.display());
+                }
+            }
         }
         Ok(GitHost { root, hooks, max_push_bytes })
     }
@@ -235,7 +299,7 @@ impl GitHost {
     /// `git http-backend`; `user` is who authenticated (for git's logs).
     pub async fn serve(&self, project_id: &str, request: GitRequest<'_>, body: Body, user: &str) -> Served {
         let GitRequest { method, rest, query, headers } = request;
-        let plain = |status: StatusCode, text: String| Served { response: (status, text).into_response(), push: None };
+        let plain = |status: StatusCode, text: String| Served::Answered((status, text).into_response());
         let is_push = rest == "git-receive-pack";
         // A cap on the body beyond git's own pack limit (`receive.maxInputSize`),
         // which answers with a message the client prints.
@@ -299,7 +363,7 @@ impl GitHost {
 
         // CGI headers, then the body.
         let mut reader = BufReader::new(stdout);
-        let mut response = Response::builder();
+        let mut cgi_headers = HeaderMap::new();
         let mut status = StatusCode::OK;
         loop {
             let mut line = String::new();
@@ -315,13 +379,18 @@ impl GitHost {
             let value = value.trim();
             if name.eq_ignore_ascii_case("status") {
                 status = value.split(' ').next().and_then(|c| c.parse().ok()).unwrap_or(StatusCode::OK);
-            } else {
-                response = response.header(name, value);
+            } else if let (Ok(name), Ok(value)) =
+                (axum::http::HeaderName::try_from(name), axum::http::HeaderValue::try_from(value))
+            {
+                cgi_headers.append(name, value);
             }
         }
-        response = response.status(status);
 
         if !is_push {
+            let mut response = Response::builder().status(status);
+            if let Some(headers) = response.headers_mut() {
+                *headers = cgi_headers;
+            }
             // Fetches stream: a clone can be large.
             tokio::spawn(async move {
                 let _ = child.wait().await;
@@ -333,7 +402,7 @@ impl GitHost {
             let stream = tokio_util::io::ReaderStream::new(reader);
             let response =
                 response.body(Body::from_stream(stream)).unwrap_or_else(|_| StatusCode::BAD_GATEWAY.into_response());
-            return Served { response, push: None };
+            return Served::Answered(response);
         }
 
         // Pushes answer little; wait for the hooks to finish so the record is complete.
@@ -344,21 +413,42 @@ impl GitHost {
         if !errors.trim().is_empty() {
             tracing::debug!("git http-backend (push): {}", errors.trim());
         }
-        let push = match exit {
+        let landed = match exit {
             Ok(s) if s.success() => record
                 .and_then(|r| std::fs::read_to_string(r.path()).ok())
                 .filter(|t| !t.is_empty())
                 .map(|t| PushRecord::parse(&t)),
             _ => None,
         };
-        let response = response.body(Body::from(output)).unwrap_or_else(|_| StatusCode::BAD_GATEWAY.into_response());
-        Served { response, push }
+        let pushed = Pushed { record: landed.unwrap_or_default(), status, headers: cgi_headers, output };
+        match pushed.record.updates.is_empty() {
+            // Refused by a hook or by git: its answer says why.
+            true => Served::Answered(pushed.respond(&[])),
+            false => Served::Pushed(pushed),
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn remote_messages_go_before_the_final_flush_on_the_progress_band() {
+        // A side-band answer: band 1 holding report-status, then the flush.
+        let report = b"000eunpack ok\n0019ok refs/heads/main\n0000";
+        let mut answer = format!("{:04x}", 4 + 1 + report.len()).into_bytes();
+        answer.push(1);
+        answer.extend(report);
+        answer.extend(b"0000");
+        let with = with_remote_messages(answer.clone(), &["FBKSD: build queued".into()]);
+        let expected_tail = b"0019\x02FBKSD: build queued\n0000";
+        assert_eq!(&with[..answer.len() - 4], &answer[..answer.len() - 4]);
+        assert_eq!(&with[answer.len() - 4..], expected_tail);
+        // Without side-band (bare report-status pkt-lines) nothing can be added.
+        let plain = b"000eunpack ok\n0000".to_vec();
+        assert_eq!(with_remote_messages(plain.clone(), &["x".into()]), plain);
+    }
 
     #[test]
     fn push_records_parse() {

@@ -1,7 +1,8 @@
 //! Outgoing e-mail through lettre: SMTP when `smtp_url` is configured, else
 //! a file outbox (`data_dir/outbox/<id>.eml`) that a developer — or a test —
 //! reads. Bodies are plain text in the encoding lettre picks (lines with
-//! long links come out quoted-printable).
+//! long links come out quoted-printable, which a naive copy breaks), so the
+//! outbox also prints each mail's links, decoded, on standard output.
 
 use crate::config::Config;
 use lettre::message::header::ContentType;
@@ -43,10 +44,18 @@ impl Mailer {
             .from(from.parse().map_err(|e| MailError(format!("sender {from:?}: {e}")))?)
             .to(to.parse().map_err(|e| MailError(format!("recipient {to:?}: {e}")))?)
             .subject(subject)
-            .singlepart(SinglePart::builder().header(ContentType::TEXT_PLAIN).body(Body::new(body)))
+            .singlepart(SinglePart::builder().header(ContentType::TEXT_PLAIN).body(Body::new(body.clone())))
             .map_err(|e| MailError(e.to_string()))?;
         match self {
-            Mailer::Outbox(t) => t.send(message).await.map(drop).map_err(|e| MailError(e.to_string())),
+            Mailer::Outbox(t) => {
+                let id = t.send(message).await.map_err(|e| MailError(e.to_string()))?;
+                // Printed, not logged: the one place a local user reads them.
+                println!("mail to {to} ({subject:?}) in the outbox as {id}.eml");
+                for link in body.split_whitespace().filter(|w| w.starts_with("http://") || w.starts_with("https://")) {
+                    println!("    link: {link}");
+                }
+                Ok(())
+            }
             Mailer::Smtp(t) => t.send(message).await.map(drop).map_err(|e| MailError(e.to_string())),
         }
     }

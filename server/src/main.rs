@@ -21,9 +21,16 @@ async fn main() -> anyhow::Result<()> {
         .init();
     let args = Args::parse();
     let config = fbksd_server::config::Config::load(args.config.as_deref())?;
-    let data_dir = config.data_dir.clone();
     let app = fbksd_server::Application::build(config).await?;
-    println!("FBKSD server: {} (data in {})", app.url(), data_dir.display());
+    let config = app.config();
+    println!("FBKSD server: {} (data in {})", app.url(), config.data_dir.display());
+    println!("Open {}/register to create an account, or log in at {}/login.", app.url(), app.url());
+    if config.smtp_url.0.is_empty() {
+        println!(
+            "Mail goes to the file outbox {} (no smtp_url is set); the links of each mail are also printed here.",
+            config.outbox_dir().display()
+        );
+    }
     if let Some((email, password)) = app.admin_credentials() {
         println!("administrator created: {email} / {password} (shown once: change it after logging in)");
     }

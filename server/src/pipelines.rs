@@ -6,10 +6,15 @@
 //! - `FBKSD_PUBLISH=<uuid>`: publishes one of the owner's result sets, at
 //!   once, as a `publish` job the server does itself.
 //!
+//! The same rules hold for push options (checked by the repositories'
+//! `pre-receive` hook, whose script is written here: [`pre_receive_hook`])
+//! and for the variables of the API and the pages ([`Request::parse`]).
+//!
 //! The sanity checks of the repository (info.json schema, build file,
 //! environment) run here, at once, so a broken repository fails in a
-//! second with the problem named, without waiting for a runner. Failures
-//! are e-mailed to the author.
+//! second with the problem named, without waiting for a runner: as a
+//! failed job, whichever way the pipeline was asked for, e-mailed to the
+//! author.
 
 use crate::accounts::User;
 use crate::error::ApiError;
@@ -31,9 +36,56 @@ pub enum Request {
     Publish(uuid::Uuid),
 }
 
+/// The options the server knows, as the refusals name them.
+const KNOWN: &str = "the server knows FBKSD_RUN (build and benchmark) and FBKSD_PUBLISH=<uuid> (publish a result)";
+
+/// Why a pipeline cannot carry both requests.
+const ONE_REQUEST: &str = "FBKSD_RUN and FBKSD_PUBLISH cannot be combined (nor given twice): \
+                           run first, then publish the result's UUID with a later push or from its results page";
+
+/// What FBKSD_PUBLISH needs, before the value that is not that.
+const PUBLISH_NEEDS: &str = "FBKSD_PUBLISH needs the UUID of one of your results (the key in its /results/<uuid> URL)";
+
+/// The `pre-receive` hook of every repository: the rules of
+/// [`Request::parse`] for push options, refusing a push before anything is
+/// written. Its lines reach the pusher as `remote:` lines.
+pub fn pre_receive_hook() -> String {
+    format!(
+        r#"#!/bin/sh
+# FBKSD: check the push options before anything is written (the same rules
+# as the server's pipeline variables; written by fbksd-server at start).
+i=0
+requests=0
+while [ "$i" -lt "${{GIT_PUSH_OPTION_COUNT:-0}}" ]; do
+    eval "option=\$GIT_PUSH_OPTION_$i"
+    case "$option" in
+        FBKSD_RUN|FBKSD_RUN=*) requests=$((requests + 1)) ;;
+        FBKSD_PUBLISH=*)
+            requests=$((requests + 1))
+            key="${{option#FBKSD_PUBLISH=}}"
+            if ! printf '%s' "$key" | grep -Eqi '^ *[0-9a-f]{{8}}-?[0-9a-f]{{4}}-?[0-9a-f]{{4}}-?[0-9a-f]{{4}}-?[0-9a-f]{{12}} *$'; then
+                echo "FBKSD: {PUBLISH_NEEDS}, not '$key'"
+                exit 1
+            fi ;;
+        *)
+            echo "FBKSD: unknown push option '$option': {KNOWN}"
+            exit 1 ;;
+    esac
+    i=$((i + 1))
+done
+if [ "$requests" -gt 1 ]; then
+    echo "FBKSD: {ONE_REQUEST}"
+    exit 1
+fi
+exit 0
+"#
+    )
+}
+
 impl Request {
     /// Parses variables given as `(name, value)`; unknown names and bad
-    /// values are refused with the allowed ones named.
+    /// values are refused with the allowed ones named, and so is more than
+    /// one request.
     pub fn parse<'a>(variables: impl IntoIterator<Item = (&'a str, &'a str)>) -> Result<Request, ApiError> {
         let mut request = Request::Build;
         for (name, value) in variables {
@@ -44,25 +96,19 @@ impl Request {
                     Err(_) => {
                         return Err(ApiError::bad_request(
                             "invalid_variable",
-                            format!(
-                                "FBKSD_PUBLISH needs the UUID of one of your results (the key in its /results/<uuid> \
-                                 URL), not {value:?}"
-                            ),
+                            format!("{PUBLISH_NEEDS}, not {value:?}"),
                         ))
                     }
                 },
                 other => {
                     return Err(ApiError::bad_request(
                         "unknown_variable",
-                        format!("unknown variable {other:?}: the server knows FBKSD_RUN and FBKSD_PUBLISH=<uuid>"),
+                        format!("unknown variable {other:?}: {KNOWN}"),
                     ))
                 }
             };
-            if request != Request::Build && request != next {
-                return Err(ApiError::bad_request(
-                    "conflicting_variables",
-                    "FBKSD_RUN and FBKSD_PUBLISH cannot be combined: run first, then publish the result's UUID",
-                ));
+            if request != Request::Build {
+                return Err(ApiError::bad_request("conflicting_variables", ONE_REQUEST));
             }
             request = next;
         }
@@ -148,10 +194,9 @@ pub async fn start(
     let mut message = String::new();
     match &request {
         Request::Build | Request::Run => {
+            // A broken repository is a failed job whoever asked: its author
+            // finds the problem in the project's history and in the mail.
             if let Err(problem) = sanity_check(state, project, commit).await {
-                if source == Source::Api {
-                    return Err(ApiError::bad_request("invalid_repository", problem));
-                }
                 failure = Some((FailureReason::BuildFailed, problem));
             }
         }
@@ -246,6 +291,22 @@ pub async fn start(
         mail_failure(state, user, &job).await;
     }
     Ok(Started { pipeline_id, job })
+}
+
+/// What a push started, in a line or two for its `remote:` output.
+pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> String {
+    let url = format!("{}/jobs/{}", state.public_url, job.id);
+    let what = format!("{} of {branch} at {}", job.kind.as_str(), &job.commit_sha[..job.commit_sha.len().min(10)]);
+    let first_line = job.message.lines().next().unwrap_or("");
+    match (job.state.as_str(), job.kind) {
+        ("queued", JobKind::Benchmark) => format!(
+            "FBKSD: {what} queued: {url}\nFBKSD: when it ends, its log and a mail give your private results link"
+        ),
+        ("queued", _) => format!("FBKSD: {what} queued: {url}"),
+        ("failed", _) => format!("FBKSD: {what} failed: {first_line}\nFBKSD: details: {url}"),
+        ("cancelled", _) => format!("FBKSD: {what} not run: {first_line}\nFBKSD: details: {url}"),
+        (_, _) => format!("FBKSD: {first_line}"),
+    }
 }
 
 /// Refuses a run over the user's quotas.

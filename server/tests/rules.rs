@@ -48,10 +48,15 @@ on_both_databases!(a_broken_repository_fails_its_build_at_once_and_mails_the_aut
     // No runner is ever given it.
     let runner = FakeRunner::register(&server, "r").await;
     assert!(runner.claim(0).await.is_none());
-    // The API refuses a run of the same commit outright, writing nothing.
+    // The API (and the Run button) make a failed job of the same commit
+    // too: in the history, mailed, and answered 422 with the job.
     let (status, body) = run_pipeline(&server, &ada, "broken", json!({ "FBKSD_RUN": "1" })).await;
-    assert_eq!((status, body["error"].as_str()), (400, Some("invalid_repository")));
-    assert_eq!(jobs_of(&server, &ada, "broken").await.len(), 1);
+    assert_eq!(status, 422, "{body}");
+    assert_eq!(body["job"]["state"], "failed");
+    assert!(body["job"]["message"].as_str().unwrap().contains("\"technique_type\""), "{body}");
+    assert_eq!(jobs_of(&server, &ada, "broken").await.len(), 2);
+    assert_eq!(server.mails_to("ada@example.org").iter().filter(|m| m.contains("failed")).count(), 2);
+    assert!(runner.claim(0).await.is_none());
 });
 
 on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is_written, |db: Db| async move {
@@ -64,8 +69,13 @@ on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is
     let (pushed, output) = push(repo.path(), &url, &["FBKSD_RUNN"]);
     assert!(!pushed);
     assert!(output.contains("unknown push option 'FBKSD_RUNN'"), "{output}");
+    assert!(output.contains("FBKSD_RUN (build and benchmark) and FBKSD_PUBLISH=<uuid>"), "the known ones: {output}");
     let (pushed, output) = push(repo.path(), &url, &["FBKSD_PUBLISH=not-a-uuid"]);
     assert!(!pushed && output.contains("needs the UUID"), "{output}");
+    // Two requests in one push: refused by the hook with the API's own words.
+    let key = uuid::Uuid::new_v4().to_string();
+    let (pushed, hook_output) = push(repo.path(), &url, &["FBKSD_RUN", &format!("FBKSD_PUBLISH={key}")]);
+    assert!(!pushed && hook_output.contains("cannot be combined"), "{hook_output}");
     assert!(jobs_of(&server, &ada, "vars").await.is_empty(), "no pipeline, and the refs did not move");
     assert_eq!(common::git(repo.path(), &["ls-remote", &url]).stdout.len(), 0);
 
@@ -73,10 +83,14 @@ on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is
     for (variables, code) in [
         (json!({ "FBKSD_RNU": "1" }), "unknown_variable"),
         (json!({ "FBKSD_PUBLISH": "1234" }), "invalid_variable"),
-        (json!({ "FBKSD_RUN": "1", "FBKSD_PUBLISH": uuid::Uuid::new_v4().to_string() }), "conflicting_variables"),
+        (json!({ "FBKSD_RUN": "1", "FBKSD_PUBLISH": key }), "conflicting_variables"),
     ] {
         let (status, body) = run_pipeline(&server, &ada, "vars", variables.clone()).await;
         assert_eq!((status, body["error"].as_str()), (400, Some(code)), "{variables}: {body}");
+        if code == "conflicting_variables" {
+            let rule = body["message"].as_str().unwrap();
+            assert!(hook_output.contains(rule), "one rule in the hook and the API: {rule:?} vs {hook_output}");
+        }
     }
     let (status, body) =
         run_pipeline(&server, &ada, "vars", json!({ "FBKSD_PUBLISH": uuid::Uuid::new_v4().to_string() })).await;

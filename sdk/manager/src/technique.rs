@@ -103,16 +103,22 @@ impl TechniqueInfo {
     /// `CMakeLists.txt` means `cpp`; Python scripts only mean `python`).
     pub fn parse(text: &str, files: &[String]) -> Result<TechniqueInfo, String> {
         let raw: RawInfo = serde_json::from_str(text).map_err(|e| format!("info.json: {e}"))?;
+        // Where a key is written, so its error names the line as well as the key.
+        let at = |key: &str| match text.lines().position(|line| line.contains(&format!("\"{key}\""))) {
+            Some(i) => format!("info.json line {}", i + 1),
+            None => "info.json".to_string(),
+        };
         let short_name = raw.short_name.ok_or("info.json: \"short_name\" is missing")?;
         if !is_valid_short_name(&short_name) {
             return Err(format!(
-                "info.json: \"short_name\" {short_name:?} must be 1 to 64 lower-case letters, digits, '-' or '_', \
-                 starting with a letter or digit"
+                "{}: \"short_name\" {short_name:?} must be 1 to 64 lower-case letters, digits, '-' or '_', \
+                 starting with a letter or digit",
+                at("short_name")
             ));
         }
         let full_name = raw.full_name.unwrap_or_else(|| short_name.clone());
         if full_name.trim().is_empty() || full_name.chars().count() > 200 {
-            return Err("info.json: \"full_name\" must be 1 to 200 characters".into());
+            return Err(format!("{}: \"full_name\" must be 1 to 200 characters", at("full_name")));
         }
         let technique_type = match raw.technique_type.as_deref().map(str::to_ascii_lowercase).as_deref() {
             Some("denoiser") => TechniqueType::Denoiser,
@@ -120,7 +126,8 @@ impl TechniqueInfo {
             Some("adaptive") => TechniqueType::Adaptive,
             Some(other) => {
                 return Err(format!(
-                    "info.json: \"technique_type\" {other:?} is unknown: use \"denoiser\", \"sampler\" or \"adaptive\""
+                    "{}: \"technique_type\" {other:?} is unknown: use \"denoiser\", \"sampler\" or \"adaptive\"",
+                    at("technique_type")
                 ))
             }
             None => {
@@ -134,11 +141,12 @@ impl TechniqueInfo {
         };
         for (i, v) in versions.iter().enumerate() {
             if v.name.trim().is_empty() || v.executable.trim().is_empty() {
-                return Err(format!("info.json: versions[{i}] needs a \"name\" and an \"executable\""));
+                return Err(format!("{}: versions[{i}] needs a \"name\" and an \"executable\"", at("versions")));
             }
             if v.executable.starts_with('/') || v.executable.split('/').any(|part| part == "..") {
                 return Err(format!(
-                    "info.json: versions[{i}].executable {:?} must be a path inside the install directory",
+                    "{}: versions[{i}].executable {:?} must be a path inside the install directory",
+                    at("executable"),
                     v.executable
                 ));
             }
@@ -148,7 +156,10 @@ impl TechniqueInfo {
             Some("cpp") => Environment::Cpp,
             Some("python") => Environment::Python,
             Some(other) => {
-                return Err(format!("info.json: \"environment\" {other:?} is unknown: use \"cpp\" or \"python\""))
+                return Err(format!(
+                    "{}: \"environment\" {other:?} is unknown: use \"cpp\" or \"python\"",
+                    at("environment")
+                ))
             }
             None if has("CMakeLists.txt") => Environment::Cpp,
             None if versions.iter().all(|v| v.executable.ends_with(".py")) => Environment::Python,
@@ -236,6 +247,10 @@ mod tests {
         }
         let error = TechniqueInfo::parse(r#"{"short_name": "a", "technique_type": "sampler"}"#, &[]).unwrap_err();
         assert!(error.contains("say which environment"), "{error}");
+        // A key's problem names the line it is written on.
+        let error = TechniqueInfo::parse("{\n  \"short_name\": \"a\",\n  \"technique_type\": \"filter\"\n}", &cmake)
+            .unwrap_err();
+        assert!(error.starts_with("info.json line 3: \"technique_type\""), "{error}");
         let error =
             TechniqueInfo::parse(r#"{"short_name": "a", "technique_type": "sampler", "environment": "cpp"}"#, &[])
                 .unwrap_err();

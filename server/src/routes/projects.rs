@@ -132,7 +132,8 @@ pub struct NewPipeline {
 }
 
 /// `POST /api/v1/projects/{name}/pipelines`: runs a pipeline (e.g. with
-/// `FBKSD_RUN`) at a ref.
+/// `FBKSD_RUN`) at a ref: 201 with the pipeline and its job, or 422 with
+/// the failed job when the repository fails its checks.
 pub async fn run_pipeline(
     State(state): State<AppState>,
     caller: Caller,
@@ -147,7 +148,10 @@ pub async fn run_pipeline(
     })?;
     let started =
         crate::pipelines::start(&state, &project, &caller.user, &commit, &git_ref, request, Source::Api).await?;
-    Ok((StatusCode::CREATED, Json(started)))
+    // A repository that fails its checks is a failed job (in the history, mailed),
+    // and the caller is told at once.
+    let status = if started.job.state == "failed" { StatusCode::UNPROCESSABLE_ENTITY } else { StatusCode::CREATED };
+    Ok((status, Json(started)))
 }
 
 /// The job `id` if `user` can read its project; 404 otherwise (and for an invalid id).
@@ -349,10 +353,14 @@ pub async fn git(
             &remote_user,
         )
         .await;
-    if let (Some(record), Some(user)) = (served.push, user) {
-        handle_push(&state, &project, user, record).await;
+    match (served, user) {
+        (crate::git::Served::Pushed(pushed), Some(user)) => {
+            let messages = handle_push(&state, &project, user, &pushed.record).await;
+            pushed.respond(&messages)
+        }
+        (crate::git::Served::Pushed(pushed), None) => pushed.respond(&[]),
+        (crate::git::Served::Answered(response), _) => response,
     }
-    served.response
 }
 
 fn ask_or_hide(caller: &GitCaller, name: &str) -> Response {
@@ -362,18 +370,30 @@ fn ask_or_hide(caller: &GitCaller, name: &str) -> Response {
     }
 }
 
-/// Starts the pipelines of a push that landed: one per branch moved.
-async fn handle_push(state: &AppState, project: &Project, user: &User, record: crate::git::PushRecord) {
-    // The pre-receive hook has refused unknown options already; this parse cannot fail on its output.
-    let request = Request::from_push_options(&record.options).unwrap_or(Request::Build);
+/// Starts the pipelines of a push that landed, one per branch moved; what
+/// each started, for the pusher.
+async fn handle_push(state: &AppState, project: &Project, user: &User, record: &crate::git::PushRecord) -> Vec<String> {
+    // The pre-receive hook has checked the options with the same rules;
+    // should the two ever disagree, the push is told, not silently built.
+    let request = match Request::from_push_options(&record.options) {
+        Ok(request) => request,
+        Err(e) => return vec![format!("FBKSD: nothing started: {}", e.message)],
+    };
+    let mut messages = Vec::new();
     for update in
         record.updates.iter().filter(|u| u.name.starts_with("refs/heads/") && !u.new.bytes().all(|b| b == b'0'))
     {
         let branch = update.name.trim_start_matches("refs/heads/");
-        if let Err(e) =
-            crate::pipelines::start(state, project, user, &update.new, branch, request.clone(), Source::Push).await
-        {
-            tracing::error!("pipeline for push to {}: {}", project.name, e.message);
+        match crate::pipelines::start(state, project, user, &update.new, branch, request.clone(), Source::Push).await {
+            Ok(started) => messages.push(crate::pipelines::describe(state, &started.job, branch)),
+            Err(e) => {
+                tracing::error!("pipeline for push to {}: {}", project.name, e.message);
+                messages.push(format!("FBKSD: no pipeline started for {branch}: {}", e.message));
+            }
         }
     }
+    if messages.is_empty() {
+        messages.push("FBKSD: no branch moved, so nothing was started (tags and deletions start no pipeline)".into());
+    }
+    messages
 }

@@ -296,11 +296,16 @@ pub struct HeldJob {
 impl FakeRunner {
     /// Registers a runner named `name`.
     pub async fn register(server: &TestServer, name: &str) -> FakeRunner {
+        FakeRunner::register_with(server, name, REGISTRATION_TOKEN).await
+    }
+
+    /// Registers a runner named `name` with the server's registration token `token`.
+    pub async fn register_with(server: &TestServer, name: &str, token: &str) -> FakeRunner {
         let client = reqwest::Client::new();
         let response = client
             .post(format!("{}/api/v1/runners", server.url))
             .json(&serde_json::json!({
-                "registration_token": REGISTRATION_TOKEN,
+                "registration_token": token,
                 "name": name,
                 "machine": { "cpu_model": "test CPU", "cores": 2 }
             }))
@@ -400,6 +405,56 @@ pub async fn upload_results(runner: &FakeRunner, job: &HeldJob, quality: f64) {
     }
     let status = job.send(runner, reqwest::Method::PUT, "results", upload.to_string().into()).await;
     assert_eq!(status, 204);
+}
+
+/// A program started by a test, with everything it prints (stdout and
+/// stderr, line by line) collected as it goes.
+pub struct Captured {
+    pub child: std::process::Child,
+    output: std::sync::Arc<std::sync::Mutex<String>>,
+}
+
+impl Captured {
+    /// Starts `command` with its output piped and collected.
+    pub fn spawn(mut command: std::process::Command) -> Captured {
+        use std::io::BufRead;
+        let mut child = command
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| panic!("{:?} starts: {e}", command.get_program()));
+        let output = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        for stream in [
+            Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+            Box::new(child.stderr.take().unwrap()),
+        ] {
+            let output = output.clone();
+            std::thread::spawn(move || {
+                for line in std::io::BufReader::new(stream).lines().map_while(Result::ok) {
+                    output.lock().unwrap().push_str(&(line + "\n"));
+                }
+            });
+        }
+        Captured { child, output }
+    }
+
+    /// What it printed so far.
+    pub fn output(&self) -> String {
+        self.output.lock().unwrap().clone()
+    }
+
+    /// The first printed line containing `text`, waiting up to `within` for it.
+    pub fn line_with(&self, text: &str, within: std::time::Duration) -> String {
+        let deadline = std::time::Instant::now() + within;
+        loop {
+            if let Some(line) = self.output().lines().find(|l| l.contains(text)) {
+                return line.to_string();
+            }
+            assert!(std::time::Instant::now() < deadline, "never printed {text:?}:\n{}", self.output());
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+    }
 }
 
 /// One test body, run once on SQLite and once on PostgreSQL.
