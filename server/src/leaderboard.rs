@@ -22,8 +22,10 @@ use std::sync::{Arc, Mutex};
 /// One technique in one (scene, spp) group.
 #[derive(Debug, Clone, Serialize)]
 pub struct Entry {
-    /// Technique.
+    /// Technique (its project's name).
     pub technique: String,
+    /// Its full name, from its info.json.
+    pub full_name: String,
     /// Its result set.
     pub result_id: String,
     /// Whether this is the set the private page is about.
@@ -56,8 +58,12 @@ pub struct Group {
 /// A technique's mean rank.
 #[derive(Debug, Clone, Serialize)]
 pub struct Standing {
-    /// Technique.
+    /// Technique (its project's name).
     pub technique: String,
+    /// Its full name, from its info.json.
+    pub full_name: String,
+    /// Its citation, from its info.json (may be empty).
+    pub citation: String,
     /// Its result set.
     pub result_id: String,
     /// Whether this is the private page's set.
@@ -223,6 +229,7 @@ fn assemble(
         let Some(set) = technique_of.get(run.result_id.as_str()) else { continue };
         by_group.entry((run.scene.clone(), run.spp)).or_default().push(Entry {
             technique: set.technique.clone(),
+            full_name: set.full_name().to_string(),
             result_id: set.id.clone(),
             highlighted: highlighted == Some(set.id.as_str()),
             status: run.status.clone(),
@@ -279,6 +286,8 @@ fn assemble(
             let set = technique_of.get(s.technique.as_str())?;
             Some(Standing {
                 technique: set.technique.clone(),
+                full_name: set.full_name().to_string(),
+                citation: set.info["citation"].as_str().unwrap_or("").trim().to_string(),
                 result_id: set.id.clone(),
                 highlighted: highlighted == Some(set.id.as_str()),
                 mean_rank: s.mean_rank,

@@ -140,6 +140,11 @@ pub struct ResultSet {
 }
 
 impl ResultSet {
+    /// The technique's full name (its info.json's `full_name`, else its project's name).
+    pub fn full_name(&self) -> &str {
+        self.info["full_name"].as_str().filter(|n| !n.trim().is_empty()).unwrap_or(&self.technique)
+    }
+
     /// Whether everyone may see it: published and not hidden.
     pub fn is_public(&self) -> bool {
         self.published_at.is_some() && self.hidden_reason.is_none()

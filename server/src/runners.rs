@@ -28,6 +28,10 @@ pub struct Runner {
     pub last_seen_at: i64,
     /// Jobs it holds now.
     pub running_jobs: i64,
+    /// What it is preparing before it takes jobs (None: ready).
+    pub preparing: Option<String>,
+    /// Since when it has been preparing that, Unix ms.
+    pub preparing_since: Option<i64>,
 }
 
 impl Runner {
@@ -125,10 +129,25 @@ pub async fn seen(pool: &AnyPool, runner_id: &str) -> Result<(), sqlx::Error> {
     Ok(())
 }
 
+/// Records what a runner is preparing (`None`: it is ready for jobs); the
+/// time is kept while the status stays the same.
+pub async fn set_status(pool: &AnyPool, runner_id: &str, preparing: Option<&str>) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "UPDATE runners SET status_since = CASE WHEN status IS NOT NULL AND status = $1 THEN status_since ELSE $2 END, \
+         status = $1, last_seen_at = $2 WHERE id = $3",
+    )
+    .bind(preparing)
+    .bind(now_ms())
+    .bind(runner_id)
+    .execute(pool)
+    .await?;
+    Ok(())
+}
+
 /// Every runner, most recently seen first.
 pub async fn all(pool: &AnyPool) -> Result<Vec<Runner>, sqlx::Error> {
     let rows = sqlx::query(
-        "SELECT r.id, r.name, r.machine, r.registered_at, r.last_seen_at, \
+        "SELECT r.id, r.name, r.machine, r.registered_at, r.last_seen_at, r.status, r.status_since, \
          (SELECT COUNT(*) FROM jobs j WHERE j.runner_id = r.id AND j.state = 'running') AS running_jobs \
          FROM runners r ORDER BY r.last_seen_at DESC",
     )
@@ -144,6 +163,8 @@ pub async fn all(pool: &AnyPool) -> Result<Vec<Runner>, sqlx::Error> {
                 registered_at: r.try_get("registered_at")?,
                 last_seen_at: r.try_get("last_seen_at")?,
                 running_jobs: r.try_get("running_jobs")?,
+                preparing: r.try_get("status")?,
+                preparing_since: r.try_get("status_since")?,
             })
         })
         .collect()

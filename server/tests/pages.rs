@@ -161,6 +161,91 @@ on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its
     assert!(technique.contains("Box filter (Python)") && technique.contains("published"));
 });
 
+on_both_databases!(a_newcomer_is_told_how_to_submit_and_what_is_being_prepared, |db: Db| async move {
+    let server = spawn(db).await;
+    let anonymous = reqwest::Client::new();
+    let home = |client: reqwest::Client| {
+        let url = format!("{}/", server.url);
+        async move { text(client.get(url).send().await.unwrap()).await }
+    };
+    // The empty board says how to submit, and that no runner is there yet.
+    let (status, page) = home(anonymous.clone()).await;
+    assert_eq!(status, 200, "the home page is the board itself");
+    assert!(page.contains("How to submit a technique") && page.contains("href=\"/register\""), "{page}");
+    assert!(page.contains("git push -o FBKSD_RUN") && page.contains("sends no options"), "{page}");
+    assert!(page.contains("No runner is connected yet"), "{page}");
+
+    // A runner preparing its references says so there, and the page refreshes itself.
+    let runner = FakeRunner::register(&server, "r1").await;
+    let status = reqwest::Client::new()
+        .post(format!("{}/api/v1/runners/status", server.url))
+        .bearer_auth(&runner.token)
+        .json(&json!({ "preparing": "making reference 2 of 8: experimental/sphere (500×500, closed form)" }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(status.status(), 204);
+    let (_, page) = home(anonymous.clone()).await;
+    assert!(page.contains("Runner r1: making reference 2 of 8: experimental/sphere"), "{page}");
+    assert!(page.contains("http-equiv=\"refresh\"") && !page.contains("No runner is connected"), "{page}");
+    reqwest::Client::new()
+        .post(format!("{}/api/v1/runners/status", server.url))
+        .bearer_auth(&runner.token)
+        .json(&json!({ "preparing": null }))
+        .send()
+        .await
+        .unwrap();
+    let (_, page) = home(anonymous.clone()).await;
+    assert!(!page.contains("Getting ready"), "a ready runner leaves nothing to say: {page}");
+
+    // Logged in: the clone URL carries a user name; an error page keeps the header.
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "private-filter", "private").await;
+    let (_, page) =
+        text(ada.browser.get(format!("{}/projects/private-filter", server.url)).send().await.unwrap()).await;
+    let host = server.url.trim_start_matches("http://");
+    assert!(page.contains(&format!("git clone http://ada@{host}/git/private-filter.git")), "{page}");
+    let (status, page) =
+        text(ada.browser.get(format!("{}/projects/nothing-here", server.url)).send().await.unwrap()).await;
+    assert_eq!(status, 404);
+    assert!(page.contains("Log out ada@example.org"), "the error page keeps the logged-in header: {page}");
+
+    // A published technique of a private repository: its public description for anyone, never its code.
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("private-filter", &ada.token), &["FBKSD_RUN"]).0);
+    let job = runner.claim(1).await.unwrap();
+    common::upload_results(&runner, &job, 1.0).await;
+    let result =
+        job.finish(&runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string();
+    let (status, _) =
+        text(anonymous.get(format!("{}/projects/private-filter", server.url)).send().await.unwrap()).await;
+    assert_eq!(status, 404, "nothing published yet: nothing to show");
+    ada.api(Method::POST, format!("{}/api/v1/results/{result}/publish", server.url)).send().await.unwrap();
+    let (_, board) = home(anonymous.clone()).await;
+    assert!(board.contains("Box filter (Python)") && board.contains("href=\"/projects/private-filter\""), "{board}");
+    assert!(!board.contains("How to submit a technique"), "a board with techniques leads with them");
+    let (status, page) =
+        text(anonymous.get(format!("{}/projects/private-filter", server.url)).send().await.unwrap()).await;
+    assert_eq!(status, 200, "{page}");
+    assert!(page.contains("Box filter (Python)") && page.contains("repository is not public"), "{page}");
+    assert!(!page.contains("git clone") && !page.contains("History"), "no code, no jobs: {page}");
+
+    // A failed job's message keeps its lines, first line first.
+    commit_all_and_push(&repo, &server.clone_url("private-filter", &ada.token)).await;
+    let build = runner.claim(1).await.unwrap();
+    let message = "the build failed (exit code 2): main.cpp:3:1: error: expected ';'\n\nlast lines of the build:\nmake: *** Error 2";
+    build.finish(&runner, json!({ "state": "failed", "reason": "build_failed", "message": message })).await;
+    let (_, page) = text(ada.browser.get(format!("{}/jobs/{}", server.url, build.id)).send().await.unwrap()).await;
+    assert!(page.contains("class=\"failure\"") && page.contains("error: expected &#39;;&#39;\n\nlast lines"), "{page}");
+    let (_, css) = text(anonymous.get(format!("{}/static/style.css", server.url)).send().await.unwrap()).await;
+    assert!(css.contains("dd.failure { white-space: pre-wrap;"), "line breaks are shown");
+});
+
+async fn commit_all_and_push(repo: &tempfile::TempDir, url: &str) {
+    common::commit_all(repo.path(), "again");
+    assert!(push(repo.path(), url, &[]).0);
+}
+
 on_both_databases!(a_running_jobs_log_streams_live_to_a_real_browser, |db: Db| async move {
     let Some(chromium) = ["chromium", "chromium-browser"].into_iter().find(|c| which(c)) else {
         panic!("Chromium is not installed: deploy/setup.sh installs it");

@@ -6,7 +6,7 @@ use crate::error::ApiError;
 use crate::AppState;
 use axum::extract::{Query, State};
 use axum::http::{header, StatusCode};
-use axum::response::{Html, IntoResponse, Response};
+use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde::Deserialize;
 use serde_json::json;
@@ -58,15 +58,22 @@ pub async fn verify(
 
 /// `GET /accounts/verify?token=…`: the link in the e-mail.
 pub async fn verify_link(State(state): State<AppState>, Query(body): Query<TokenBody>) -> Response {
-    match accounts::redeem_email_token(&state.pool, &body.token, "verify").await {
-        Ok(user_id) => match accounts::mark_verified(&state.pool, &user_id).await {
-            Ok(()) => {
-                Html("<!doctype html><title>FBKSD</title><p>Your e-mail address is confirmed: you can log in.</p>")
-                    .into_response()
-            }
-            Err(e) => ApiError::from(e).into_response(),
-        },
-        Err(e) => (e.status, Html(format!("<!doctype html><title>FBKSD</title><p>{}</p>", e.message))).into_response(),
+    let verified = match accounts::redeem_email_token(&state.pool, &body.token, "verify").await {
+        Ok(user_id) => accounts::mark_verified(&state.pool, &user_id).await.map_err(ApiError::from),
+        Err(e) => Err(e),
+    };
+    let log_in = Some(("/login", "Log in"));
+    match verified {
+        Ok(()) => super::pages::message_with_link(
+            "Address confirmed",
+            "Your e-mail address is confirmed: log in, create an access token, and push your technique.",
+            log_in,
+            true,
+        ),
+        Err(e) => {
+            let page = super::pages::message_with_link("This link does not work", &e.message, log_in, false);
+            (e.status, page).into_response()
+        }
     }
 }
 

@@ -68,6 +68,7 @@ pub fn router(state: AppState) -> Router {
         // Runners, with their runner token or a job token.
         .route("/api/v1/runners", post(runner::register))
         .route("/api/v1/runners/jobs", post(runner::claim))
+        .route("/api/v1/runners/status", post(runner::status))
         .route("/api/v1/jobs/{id}/heartbeat", post(runner::heartbeat))
         .route("/api/v1/jobs/{id}/results", put(runner::put_results))
         .route("/api/v1/jobs/{id}/files/{*name}", put(runner::put_file))
@@ -101,6 +102,7 @@ pub fn router(state: AppState) -> Router {
         .route("/admin/jobs/{id}/requeue", post(pages::admin_requeue))
         .route("/admin/hide", post(pages::admin_hide))
         .route("/admin/seasons", post(pages::admin_season))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), pages::error_pages_keep_the_header))
         .with_state(state)
         // A bug in one handler answers 500 instead of dropping the connection.
         .layer(tower_http::catch_panic::CatchPanicLayer::new())

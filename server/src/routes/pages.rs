@@ -78,15 +78,50 @@ impl From<sqlx::Error> for PageError {
     }
 }
 
+/// An error page's heading and text, kept on its response so that
+/// [`error_pages_keep_the_header`] can render it again for the visitor.
+#[derive(Clone)]
+struct ShownError {
+    heading: String,
+    text: String,
+}
+
 impl IntoResponse for PageError {
     fn into_response(self) -> Response {
-        let page = MessagePage {
-            nav: Nav { user: None, csrf: String::new() },
+        let shown = ShownError {
             heading: self.0.status.canonical_reason().unwrap_or("Error").to_string(),
             text: self.0.message,
-            kind: "error",
         };
-        (self.0.status, render(&page)).into_response()
+        let page = error_page(Nav { user: None, csrf: String::new() }, &shown);
+        let mut response = (self.0.status, page).into_response();
+        response.extensions_mut().insert(shown);
+        response
+    }
+}
+
+fn error_page(nav: Nav, shown: &ShownError) -> Response {
+    render(&MessagePage { nav, heading: shown.heading.clone(), text: shown.text.clone(), kind: "error", link: None })
+}
+
+/// Middleware: an error page keeps the logged-in header. Errors are raised
+/// deep in handlers (`?`) where the visitor is not at hand, so the page is
+/// rendered again here with the session's user.
+pub async fn error_pages_keep_the_header(
+    State(state): State<AppState>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    let token = cookie(request.headers(), SESSION_COOKIE).map(str::to_string);
+    let response = next.run(request).await;
+    let (Some(shown), Some(token)) = (response.extensions().get::<ShownError>().cloned(), token) else {
+        return response;
+    };
+    match accounts::session_user(&state.pool, &token).await {
+        Ok(Some((user, csrf))) => {
+            let status = response.status();
+            (status, error_page(Nav { user: Some(user), csrf }, &shown)).into_response()
+        }
+        _ => response,
     }
 }
 
@@ -106,10 +141,69 @@ struct MessagePage {
     heading: String,
     text: String,
     kind: &'static str,
+    /// A link to go on with: (href, text).
+    link: Option<(String, String)>,
 }
 
 fn message(nav: Nav, heading: &str, text: impl Into<String>) -> Response {
-    render(&MessagePage { nav, heading: heading.into(), text: text.into(), kind: "ok" })
+    render(&MessagePage { nav, heading: heading.into(), text: text.into(), kind: "ok", link: None })
+}
+
+/// A styled page for handlers outside this module (the e-mail link's
+/// answer): a heading, a text, and a link to go on with.
+pub fn message_with_link(heading: &str, text: &str, link: Option<(&str, &str)>, ok: bool) -> Response {
+    render(&MessagePage {
+        nav: Nav { user: None, csrf: String::new() },
+        heading: heading.into(),
+        text: text.into(),
+        kind: if ok { "ok" } else { "error" },
+        link: link.map(|(href, text)| (href.to_string(), text.to_string())),
+    })
+}
+
+/// How to submit a technique, as the home page and the project pages say it.
+pub struct HowTo {
+    logged_in: bool,
+    /// The project it is about, if any.
+    project: Option<String>,
+    /// Its clone URL with a user name (git asks for the password: a token).
+    clone_url: String,
+}
+
+fn how_to(state: &AppState, user: Option<&User>, project: Option<&str>) -> HowTo {
+    // Any user name works; the address's local part reads naturally when it is URL-safe.
+    let name = user
+        .and_then(|u| u.email.split('@').next())
+        .filter(|n| !n.is_empty() && n.chars().all(|c| c.is_ascii_alphanumeric() || "._-".contains(c)))
+        .unwrap_or("me");
+    let (scheme, host) = state.public_url.split_once("://").unwrap_or(("http", &state.public_url));
+    HowTo {
+        logged_in: user.is_some(),
+        project: project.map(str::to_string),
+        clone_url: format!("{scheme}://{name}@{host}/git/{}.git", project.unwrap_or("<project>")),
+    }
+}
+
+/// What the service is preparing before jobs can run, one line per
+/// runner, or that no runner is connected.
+async fn preparation(state: &AppState) -> Result<Vec<String>, sqlx::Error> {
+    let now = crate::now_ms();
+    let runners = crate::runners::all(&state.pool).await?;
+    let connected: Vec<_> = runners.iter().filter(|r| r.healthy(&state.config, now)).collect();
+    if connected.is_empty() {
+        return Ok(vec!["No runner is connected yet: pushes and runs wait in the queue until one is \
+                        (deploy/serve.sh starts one as soon as it has built its images)."
+            .into()]);
+    }
+    Ok(connected
+        .iter()
+        .filter_map(|r| {
+            let status = r.preparing.as_ref()?;
+            let seconds = (now - r.preparing_since.unwrap_or(now)).max(0) as u64 / 1000;
+            let elapsed = humantime::format_duration(std::time::Duration::from_secs(seconds));
+            Some(format!("Runner {}: {status} (for {elapsed}); jobs wait in the queue meanwhile.", r.name))
+        })
+        .collect())
 }
 
 /// Unix ms as a UTC date and time.
@@ -137,9 +231,10 @@ pub async fn static_file(Path(name): Path<String>) -> Response {
     ([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "public, max-age=3600")], body).into_response()
 }
 
-/// `GET /`: the leaderboard.
-pub async fn home() -> Redirect {
-    Redirect::to("/results/")
+/// `GET /`: the leaderboard, with how to submit while it is empty and what
+/// the service is still preparing.
+pub async fn home(State(state): State<AppState>, Visitor(nav): Visitor) -> PageResult {
+    board_page(&state, nav, BoardQuery::default(), None).await
 }
 
 // ---------------------------------------------------------------- accounts
@@ -402,29 +497,58 @@ struct ProjectPage {
     technique_type: String,
     comment: String,
     citation: String,
+    /// Only the public description: the visitor cannot read the repository
+    /// but the technique has published results.
+    public_only: bool,
     clone_url: String,
     owner: bool,
+    how_to: HowTo,
     results: Vec<ResultRow>,
     jobs: Vec<JobRow>,
 }
 
 /// `GET /projects/{name}`: the technique page (its info.json at the
-/// latest commit) and its history.
+/// latest commit) and its history. A visitor who cannot read the
+/// repository still sees a technique with published results: its public
+/// description (the info.json it was published with) and those results,
+/// never its code or jobs.
 pub async fn project_page(
     State(state): State<AppState>,
     Visitor(nav): Visitor,
     Path(name): Path<String>,
 ) -> PageResult {
-    let project = projects::readable(&state.pool, &name, nav.user.as_ref()).await?;
-    let owner = nav.user.as_ref().is_some_and(|u| project.writable_by(u) || u.is_admin);
-    let info = match state.git.resolve(&project.id, "main").await {
-        Some(commit) => crate::pipelines::sanity_check(&state, &project, &commit).await.ok(),
-        None => None,
+    let (project, public_only) = match projects::readable(&state.pool, &name, nav.user.as_ref()).await {
+        Ok(project) => (project, false),
+        Err(hidden) => match projects::by_name(&state.pool, &name).await? {
+            Some(project) => (project, true),
+            None => return Err(hidden.into()),
+        },
     };
-    let results = crate::results::of_project(&state.pool, &project.id)
+    let owner = !public_only && nav.user.as_ref().is_some_and(|u| project.writable_by(u) || u.is_admin);
+    let sets: Vec<_> = crate::results::of_project(&state.pool, &project.id)
         .await?
         .into_iter()
         .filter(|r| owner || r.is_public())
+        .collect();
+    let info = if public_only {
+        // The newest published description; no published result, no page.
+        let Some(set) = sets.iter().max_by_key(|r| r.published_at) else {
+            return Err(ApiError::new(
+                StatusCode::NOT_FOUND,
+                "not_found",
+                format!("no project {name:?} that you can see"),
+            )
+            .into());
+        };
+        serde_json::from_value::<fbksd_manager::technique::TechniqueInfo>(set.info.clone()).ok()
+    } else {
+        match state.git.resolve(&project.id, "main").await {
+            Some(commit) => crate::pipelines::sanity_check(&state, &project, &commit).await.ok(),
+            None => None,
+        }
+    };
+    let results = sets
+        .into_iter()
         .map(|r| ResultRow {
             status: match (&r.hidden_reason, r.published_at) {
                 (Some(_), _) => "hidden".into(),
@@ -437,14 +561,19 @@ pub async fn project_page(
             created: when(r.created_at),
         })
         .collect();
-    let jobs = crate::jobs::of_project(&state.pool, &project.id, 50).await?.iter().map(job_row).collect();
+    let jobs = match public_only {
+        true => Vec::new(),
+        false => crate::jobs::of_project(&state.pool, &project.id, 50).await?.iter().map(job_row).collect(),
+    };
     let page = ProjectPage {
         full_name: info.as_ref().map(|i| i.full_name.clone()).unwrap_or_else(|| project.name.clone()),
         technique_type: info.as_ref().map(|i| format!("{:?}", i.technique_type).to_lowercase()).unwrap_or_default(),
         comment: info.as_ref().map(|i| i.comment.clone()).unwrap_or_default(),
         citation: info.as_ref().map(|i| i.citation.clone()).unwrap_or_default(),
         clone_url: state.clone_url(&project.name),
+        how_to: how_to(&state, nav.user.as_ref(), Some(&project.name)),
         visibility: project.visibility.as_str(),
+        public_only,
         name: project.name,
         owner,
         results,
@@ -536,6 +665,8 @@ struct GroupView {
 
 struct StandingView {
     technique: String,
+    full_name: String,
+    citation: String,
     result_id: String,
     highlighted: bool,
     mean_rank: String,
@@ -545,6 +676,7 @@ struct StandingView {
 struct ResultView {
     id: String,
     technique: String,
+    full_name: String,
     commit: String,
     season: i64,
     created: String,
@@ -569,6 +701,10 @@ struct BoardPage {
     tag_query: String,
     standings: Vec<StandingView>,
     groups: Vec<GroupView>,
+    /// Shown on the public board while it is empty.
+    how_to: Option<HowTo>,
+    /// What the service still prepares (public board only).
+    preparing: Vec<String>,
 }
 
 async fn board_page(
@@ -581,11 +717,12 @@ async fn board_page(
     let board = leaderboard::build(&state.pool, &state.boards, &query, result.as_ref()).await?;
     let seasons = crate::results::seasons(&state.pool).await?.into_iter().map(|(n, note, _)| (n, note)).collect();
     let title = match &result {
-        Some(r) => format!("Results of {}", r.technique),
+        Some(r) => format!("Results of {}", r.full_name()),
         None => format!("Leaderboard, season {}", board.season),
     };
     let result = result.map(|r| ResultView {
         owner: nav.user.as_ref().is_some_and(|u| r.user_id.as_deref() == Some(u.id.as_str())),
+        full_name: r.full_name().to_string(),
         id: r.id,
         technique: r.technique,
         commit: r.commit_sha,
@@ -604,7 +741,8 @@ async fn board_page(
                 .iter()
                 .map(|e| EntryView {
                     image: e.image.as_ref().map(|i| format!("/results/{}/files/{i}", e.result_id)).unwrap_or_default(),
-                    technique: e.technique.clone(),
+                    // Full names need not be unique: the project's name tells them apart.
+                    technique: format!("{} ({})", e.full_name, e.technique),
                     highlighted: e.highlighted,
                     status: e.status.clone(),
                     message: e.message.clone(),
@@ -617,11 +755,13 @@ async fn board_page(
             spp: g.spp,
         })
         .collect();
-    let standings = board
+    let standings: Vec<StandingView> = board
         .standings
         .iter()
         .map(|s| StandingView {
             technique: s.technique.clone(),
+            full_name: s.full_name.clone(),
+            citation: s.citation.clone(),
             result_id: s.result_id.clone(),
             highlighted: s.highlighted,
             mean_rank: format!("{:.2}", s.mean_rank),
@@ -629,7 +769,14 @@ async fn board_page(
         })
         .collect();
     let tag = board.tag.clone().unwrap_or_default();
+    let (how_to, preparing) = match &result {
+        None if standings.is_empty() => (Some(how_to(state, nav.user.as_ref(), None)), preparation(state).await?),
+        None => (None, preparation(state).await?),
+        Some(_) => (None, Vec::new()),
+    };
     let page = BoardPage {
+        how_to,
+        preparing,
         nav,
         title,
         result,

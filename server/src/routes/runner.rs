@@ -4,6 +4,7 @@
 //! ```text
 //! POST /api/v1/runners              {registration_token, name, machine} → {id, token}
 //! POST /api/v1/runners/jobs         runner token; {wait_seconds} → 200 job | 204 none
+//! POST /api/v1/runners/status       runner token; {preparing: text | null} → 204
 //! POST /api/v1/jobs/{id}/heartbeat  job token → {lease_seconds}
 //! POST /api/v1/jobs/{id}/log        job token; text body (appended)
 //! PUT  /api/v1/jobs/{id}/results    job token; results JSON (see `results`)
@@ -43,6 +44,26 @@ pub async fn register(
     let (id, token) =
         crate::runners::register(&state.pool, &body.registration_token, &body.name, &body.machine).await?;
     Ok((StatusCode::CREATED, Json(json!({ "id": id, "token": token }))))
+}
+
+/// What a runner is doing before it takes jobs.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StatusReport {
+    /// What it prepares, for people (e.g. "reference 3 of 8: experimental/sphere, 4096 spp"); null when ready.
+    preparing: Option<String>,
+}
+
+/// `POST /api/v1/runners/status`: a runner says what it prepares (shown on
+/// the home page while jobs wait), or that it is ready.
+pub async fn status(
+    State(state): State<AppState>,
+    RunnerCaller(runner_id): RunnerCaller,
+    Json(body): Json<StatusReport>,
+) -> Result<StatusCode, ApiError> {
+    let preparing = body.preparing.map(|p| p.chars().take(300).collect::<String>());
+    crate::runners::set_status(&state.pool, &runner_id, preparing.as_deref()).await?;
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// How long a claim may wait.
