@@ -13,20 +13,23 @@
 #
 # Without --bin-dir the release binaries are built first (target/release).
 set -euo pipefail
+# Paths given are the caller's; the script works from the repository's root.
+caller=$(pwd)
+absolute() { case "$1" in /*) echo "$1" ;; *) echo "$caller/$1" ;; esac; }
 cd "$(dirname "$0")/.."
 bin_dir=""
-manifest=fbksd-data/images.json
+manifest=$(pwd)/fbksd-data/images.json
 while [ $# -gt 0 ]; do
     case "$1" in
-        --bin-dir) bin_dir=$2; shift 2 ;;
-        --manifest) manifest=$2; shift 2 ;;
+        --bin-dir) bin_dir=$(absolute "$2"); shift 2 ;;
+        --manifest) manifest=$(absolute "$2"); shift 2 ;;
         *) echo "usage: build-images.sh [--bin-dir DIR] [--manifest FILE]" >&2; exit 2 ;;
     esac
 done
 say() { echo "build-images: $*" >&2; }
 if [ -z "$bin_dir" ]; then
     cargo build --release --locked -p fbksd-capi -p fbksd-python -p fbksd-procedural -p fbksd-embree
-    bin_dir=target/release
+    bin_dir=$(pwd)/target/release
 fi
 for f in libfbksd.so libfbksd.a lib_native.so fbksd-procedural fbksd-embree; do
     [ -f "$bin_dir/$f" ] || { say "$bin_dir/$f is missing: build the workspace first (cargo build)"; exit 1; }

@@ -3,33 +3,33 @@
 # (SQLite and data in ./fbksd-data) with an fbksd-ci runner beside it, so a
 # pushed technique is built and benchmarked with nothing else but Docker.
 #
-# First start: builds the release binaries and the images (a few minutes),
-# and the references of the runner's scene pool (cached beside each scene).
-# The server prints the administrator's one-time password. Ctrl-C stops both.
-#
 #   bash deploy/serve.sh
 #
-# The runner's settings are fbksd-ci's flags as FBKSD_CI_* variables, e.g.
-# FBKSD_CI_SCENES=experimental/sphere,experimental/fireflies FBKSD_CI_SPP=1,4.
+# The server starts first, as soon as it is built: registration, projects
+# and pushes work at once, and jobs wait in the queue while the rest is
+# prepared (the runner's binaries and images, then the references of its
+# scene pool, which the runner makes itself and reports on the home page).
+# Everything is cached for the next start. Ctrl-C stops both.
+#
+# Options, as environment variables:
+#   FBKSD_DATA_DIR   the data directory (default fbksd-data, relative to the repository)
+#   FBKSD_PROFILE    release (default) or debug (reuses the test build: CI)
+#   FBKSD_SERVER_*   the server's settings, e.g. FBKSD_SERVER_BIND=127.0.0.1:9000
+#   FBKSD_CI_*       the runner's flags, e.g. FBKSD_CI_SCENES=experimental/sphere FBKSD_CI_SPP=1,4
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data=${FBKSD_DATA_DIR:-fbksd-data}
 mkdir -p "$data"
-cargo build --release --locked -p fbksd-server -p fbksd-ci -p fbksd-capi -p fbksd-python -p fbksd-procedural -p fbksd-embree
-bin=target/release
-bash deploy/build-images.sh --bin-dir "$bin" --manifest "$data/images.json"
+# Absolute, for everything started below (the server resolves it too).
+data=$(cd "$data" && pwd)
 
-# The runner's scene pool (default: the experimental scenes and the small
-# Cornell box: about five minutes of references on two cores) and its references.
-: "${FBKSD_CI_SCENES:=experimental/black-ring,experimental/defocus-checkerboard,experimental/fireflies,experimental/mandelbrot,experimental/moving-bars,experimental/sin-bands,experimental/sphere,production-small/cornell-box}"
-export FBKSD_CI_SCENES
-IFS=, read -ra pool <<<"$FBKSD_CI_SCENES"
-for scene in "${pool[@]}"; do
-    if [ ! -f "scenes/$scene/reference.exr" ]; then
-        renderer=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["renderer"])' "scenes/$scene/fbksd-scene.json")
-        "$bin/fbksd-$renderer" reference "scenes/$scene"
-    fi
-done
+case "${FBKSD_PROFILE:-release}" in
+    release) build() { cargo build --release --locked "$@"; }; bin=target/release ;;
+    # The test build is of the whole workspace: building it again is a no-op.
+    debug) build() { cargo build --locked --workspace; }; bin=target/debug ;;
+    *) echo "serve: FBKSD_PROFILE must be release or debug, not '$FBKSD_PROFILE'" >&2; exit 1 ;;
+esac
+bin=$(pwd)/$bin
 
 # One registration token shared by the server and its runner, kept private.
 token_file="$data/runner-registration-token"
@@ -38,18 +38,36 @@ if [ ! -s "$token_file" ]; then
 fi
 token=$(cat "$token_file")
 
-export FBKSD_SERVER_DATA_DIR="$data"
-export FBKSD_SERVER_RUNNER_REGISTRATION_TOKEN="$token"
-"$bin/fbksd-server" &
+server="" runner=""
+stop() {
+    trap - EXIT INT TERM
+    [ -n "$runner" ] && kill "$runner" 2>/dev/null
+    [ -n "$server" ] && kill "$server" 2>/dev/null
+    wait
+}
+trap stop EXIT INT TERM
+
+echo "serve: building the server" >&2
+build -p fbksd-server
+FBKSD_SERVER_DATA_DIR="$data" FBKSD_SERVER_RUNNER_REGISTRATION_TOKEN="$token" "$bin/fbksd-server" &
 server=$!
-trap 'kill $server $runner 2>/dev/null; wait' EXIT INT TERM
-runner=""
 bind=${FBKSD_SERVER_BIND:-127.0.0.1:8096}
 for _ in $(seq 100); do
     python3 -c 'import socket,sys; h,p=sys.argv[1].rsplit(":",1); socket.create_connection((h,int(p)),1)' "$bind" 2>/dev/null && break
+    kill -0 "$server" 2>/dev/null || { echo "serve: the server stopped" >&2; exit 1; }
     sleep 0.2
 done
+
+echo "serve: the service answers; building the runner and its images (jobs wait in the queue meanwhile)" >&2
+build -p fbksd-ci -p fbksd-capi -p fbksd-python -p fbksd-procedural -p fbksd-embree
+bash deploy/build-images.sh --bin-dir "$bin" --manifest "$data/images.json"
+
+# The runner's scene pool (default: the experimental scenes and the small
+# Cornell box); it makes the missing references before it takes jobs.
+: "${FBKSD_CI_SCENES:=experimental/black-ring,experimental/defocus-checkerboard,experimental/fireflies,experimental/mandelbrot,experimental/moving-bars,experimental/sin-bands,experimental/sphere,production-small/cornell-box}"
+export FBKSD_CI_SCENES
 "$bin/fbksd-ci" --server "http://$bind" --registration-token "$token" --work-dir "$data/ci" \
-    --images "$data/images.json" --scene-root scenes &
+    --images "$data/images.json" --scene-root "$(pwd)/scenes" &
 runner=$!
+echo "serve: runner started; it makes the references its scenes lack before it takes jobs (see the home page)" >&2
 wait -n "$server" "$runner"

@@ -159,6 +159,17 @@ impl Api {
         response.json().await.map(Some).map_err(|e| unreadable("a claim", e))
     }
 
+    /// Says what the runner prepares before it takes jobs (`None`: ready);
+    /// shown on the server's home page.
+    pub async fn status(&self, runner_token: &str, preparing: Option<&str>) -> Result<(), ApiError> {
+        let body = serde_json::json!({ "preparing": preparing });
+        self.send("a status report", Duration::from_secs(30), || {
+            self.http.post(self.url("runners/status")).bearer_auth(runner_token).json(&body)
+        })
+        .await
+        .map(drop)
+    }
+
     /// Extends a job's lease (one attempt: heartbeats repeat anyway).
     pub async fn heartbeat(&self, job: &Claim) -> Result<(), ApiError> {
         self.send("a heartbeat", Duration::ZERO, || self.job_request(job, reqwest::Method::POST, "heartbeat"))

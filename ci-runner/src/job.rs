@@ -298,12 +298,16 @@ async fn build(
         }
     };
     log.line(format!("[fbksd-ci] build: {}", spec.cmd.join(" ").lines().next().unwrap_or("")));
-    let tail = Arc::new(Mutex::new(Vec::<u8>::new()));
+    // The start of the output (where the first compiler error usually is) and its end.
+    let (head, tail) = (Arc::new(Mutex::new(Vec::<u8>::new())), Arc::new(Mutex::new(Vec::<u8>::new())));
     let sink = {
-        let tail = tail.clone();
+        let (head, tail) = (head.clone(), tail.clone());
         let log = log.clone();
         move |bytes: &[u8]| {
             log.raw(bytes);
+            let mut h = head.lock().unwrap();
+            let room = (64usize << 10).saturating_sub(h.len());
+            h.extend_from_slice(&bytes[..bytes.len().min(room)]);
             let mut t = tail.lock().unwrap();
             t.extend_from_slice(bytes);
             let excess = t.len().saturating_sub(4000);
@@ -316,6 +320,8 @@ async fn build(
         .await
         .map_err(|e| Failure::infrastructure(format!("Docker: cannot run the build container: {e}")))?;
     let tail = String::from_utf8_lossy(&tail.lock().unwrap()).trim().to_string();
+    let first_error =
+        first_error_line(&String::from_utf8_lossy(&head.lock().unwrap())).or_else(|| first_error_line(&tail));
     match end {
         ContainerEnd { timed_out: true, .. } => {
             return Err(Failure::new(
@@ -331,10 +337,11 @@ async fn build(
         }
         ContainerEnd { exit_code: 0, .. } => {}
         ContainerEnd { exit_code, .. } => {
+            let first = first_error.map(|line| format!(" {line}")).unwrap_or_default();
             return Err(Failure::new(
                 FailureReason::BuildFailed,
-                format!("the build failed (exit code {exit_code}):\n{tail}"),
-            ))
+                format!("the build failed (exit code {exit_code}):{first}\n\nlast lines of the build:\n{tail}"),
+            ));
         }
     }
     for v in &info.versions {
@@ -524,5 +531,38 @@ fn files_under(root: &Path, dir: &Path, out: &mut Vec<(String, PathBuf)>) {
             Ok(_) => out.push((path.strip_prefix(root).unwrap_or(&path).to_string_lossy().into_owned(), path)),
             Err(_) => {}
         }
+    }
+}
+
+/// The first line of build output that reports an error (a compiler's
+/// `file:line:col: error: …`, `CMake Error …`, a Python `…Error: …`), which
+/// leads a failed build's message.
+fn first_error_line(output: &str) -> Option<String> {
+    output
+        .lines()
+        .map(str::trim)
+        .find(|line| {
+            let lower = line.to_ascii_lowercase();
+            lower.contains("error:") || lower.starts_with("cmake error") || lower.contains("fatal error")
+        })
+        .map(|line| line.chars().take(500).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_failed_build_leads_with_its_first_error() {
+        let output = "-- Configuring done\n[ 50%] Building CXX object main.cpp.o\n\
+                      /technique/main.cpp:7:5: error: 'foo' was not declared in this scope\n\
+                      /technique/main.cpp:9:1: error: expected ';'\nmake: *** [all] Error 2\n";
+        assert_eq!(
+            super::first_error_line(output).as_deref(),
+            Some("/technique/main.cpp:7:5: error: 'foo' was not declared in this scope")
+        );
+        assert_eq!(
+            super::first_error_line("CMake Error at CMakeLists.txt:3 (find_package):\n").as_deref(),
+            Some("CMake Error at CMakeLists.txt:3 (find_package):")
+        );
+        assert_eq!(super::first_error_line("all good\n"), None);
     }
 }

@@ -43,8 +43,8 @@ pub async fn connect_docker() -> Result<Docker, String> {
     Ok(docker)
 }
 
-/// Waits until Docker answers, saying so every 5 seconds.
-async fn wait_for_docker() -> Docker {
+/// Waits until Docker answers, saying so (here and to the server) every 5 seconds.
+async fn wait_for_docker(api: &Api, runner_token: &str) -> Docker {
     loop {
         match connect_docker().await {
             Ok(docker) => return docker,
@@ -53,6 +53,7 @@ async fn wait_for_docker() -> Docker {
                 tracing::error!(
                     "Docker is unavailable at {host} ({e}); this runner claims no job until it answers (retrying every 5 s)"
                 );
+                let _ = api.status(runner_token, Some(&format!("waiting for Docker at {host}"))).await;
                 tokio::time::sleep(Duration::from_secs(5)).await;
             }
         }
@@ -70,9 +71,20 @@ impl Runner {
             .map_err(|e| anyhow::anyhow!("scene root {}: {e}", config.scene_root.display()))?;
         let api = Api::new(&config.server);
         let machine = Machine::probe(config.cpus.as_deref());
-        let scenes = crate::pool::load(&config.scene_root, &config.scene_dirs()?)?;
+        // Registered first, so the server can show what is being prepared.
         let credentials = identity(&config, &api, &machine).await?;
-        let docker = wait_for_docker().await;
+        let scene_dirs = config.scene_dirs()?;
+        let prepared = crate::pool::make_missing_references(&config.scene_root, &scene_dirs, &api, &credentials.token)
+            .await
+            .and_then(|()| crate::pool::load(&config.scene_root, &scene_dirs));
+        let scenes = match prepared {
+            Ok(scenes) => scenes,
+            Err(e) => {
+                let _ = api.status(&credentials.token, Some(&format!("stopped: {e}"))).await;
+                return Err(e);
+            }
+        };
+        let docker = wait_for_docker(&api, &credentials.token).await;
         let images = Images::resolve(&config.images, &docker).await?;
         // Pinned even when no cores are named: to all of them, as recorded in every result.
         let sandbox = Sandbox::new(docker, &credentials.id, machine.cpuset.clone(), config.pids, config.tmpfs_mib);
@@ -97,6 +109,7 @@ impl Runner {
             machine.cpu_model,
             machine.cpuset
         );
+        api.status(&credentials.token, None).await?;
         let runner = (credentials.id.clone(), config.runner_name());
         Ok(Runner {
             ctx: JobContext { config, api, sandbox, images, machine, scenes, runner, rendezvous_parent },

@@ -1,8 +1,9 @@
 //! The whole flow with real Docker, real git, the real server and the real
-//! `fbksd-ci`: push the C++ box filter → build job succeeds → FBKSD_RUN →
+//! `fbksd-ci`: push the Python box filter → build job succeeds → FBKSD_RUN →
 //! private results URL in the job log → metrics for every scene and spp →
-//! FBKSD_PUBLISH → the public leaderboard lists it; then the same for the
-//! Python box filter. Prints the push-to-results times (see the README).
+//! FBKSD_PUBLISH → the public leaderboard lists it. Prints the
+//! push-to-results times (see the README). The C++ box filter takes the
+//! same path through `deploy/serve.sh` itself (`serve_sh.rs`).
 
 mod common;
 
@@ -20,7 +21,7 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
     let runner = RunnerProcess::start(&server.url, &work.path().join("runner"), &options);
     let ada = server.user("ada@example.org").await;
 
-    for name in ["box-filter-cpp", "box-filter-python"] {
+    for name in ["box-filter-python"] {
         server.create_project(&ada, name, "private").await;
         let repo = technique_repository(name);
         let url = server.clone_url(name, &ada.token);
@@ -54,12 +55,7 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
         for line in log.lines().filter(|l| l.contains("times: ") || l.contains(" spp: ")) {
             eprintln!("FIGURE {name}: {line}");
         }
-        let private = log
-            .lines()
-            .find_map(|l| l.split("private results: ").nth(1))
-            .unwrap_or_else(|| panic!("no private results URL in the log:\n{log}"))
-            .trim()
-            .to_string();
+        let private = private_results_url(&log);
         let uuid = private.rsplit('/').next().unwrap().to_string();
 
         // Metrics for every scene and spp, with provenance.

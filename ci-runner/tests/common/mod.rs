@@ -216,6 +216,15 @@ pub async fn newest_job(server: &TestServer, user: &TestUser, project: &str, kin
         .to_string()
 }
 
+/// The private results URL a benchmark job's log ends with.
+pub fn private_results_url(log: &str) -> String {
+    log.lines()
+        .find_map(|l| l.split("private results: ").nth(1))
+        .unwrap_or_else(|| panic!("no private results URL in the log:\n{log}"))
+        .trim()
+        .to_string()
+}
+
 /// A repository with the files `files` (path, content), committed on `main`.
 pub fn repository_with(files: &[(&str, &str)]) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();

@@ -68,7 +68,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     for path in &args.scenes {
         if SceneMeta::is_meta(path) {
             let meta = SceneMeta::load(path)?;
-            let program = renderer_program(&meta.renderer)?;
+            let program = fbksd_manager::scenes::renderer_program(&meta.renderer)
+                .map_err(anyhow::Error::msg)?
+                .to_string_lossy()
+                .into_owned();
             let file = std::fs::canonicalize(meta.scene_file())
                 .with_context(|| format!("scene {}: {}", meta.name, meta.scene_file().display()))?;
             let renderer_argv = vec![program, file.to_string_lossy().into_owned()];
@@ -107,24 +110,6 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         std::process::exit(2);
     }
     Ok(())
-}
-
-/// The program of a renderer named in scene metadata: `fbksd-<name>` (or
-/// `fbksd-<name>-renderer`) next to this program, else on PATH.
-fn renderer_program(name: &str) -> anyhow::Result<String> {
-    let candidates = [format!("fbksd-{name}"), format!("fbksd-{name}-renderer")];
-    let here = std::env::current_exe()?;
-    let path = std::env::var_os("PATH").unwrap_or_default();
-    let dirs = here.parent().map(PathBuf::from).into_iter().chain(std::env::split_paths(&path));
-    for dir in dirs {
-        for c in &candidates {
-            let p = dir.join(c);
-            if p.is_file() {
-                return Ok(p.to_string_lossy().into_owned());
-            }
-        }
-    }
-    bail!("no program for renderer {name:?}: looked for {} next to fbksd and on PATH", candidates.join(" and "))
 }
 
 fn report(progress: Progress<'_>, live: bool) {

@@ -76,6 +76,28 @@ pub struct SceneMeta {
 /// The metadata file's name.
 pub const META_FILE: &str = "fbksd-scene.json";
 
+/// The program of a renderer named in scene metadata: `fbksd-<name>` (or
+/// `fbksd-<name>-renderer`) next to the running program, else on PATH.
+pub fn renderer_program(name: &str) -> Result<PathBuf, String> {
+    let candidates = [format!("fbksd-{name}"), format!("fbksd-{name}-renderer")];
+    let here = std::env::current_exe().map_err(|e| format!("this program's path: {e}"))?;
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    let dirs = here.parent().map(PathBuf::from).into_iter().chain(std::env::split_paths(&path));
+    for dir in dirs {
+        for c in &candidates {
+            let p = dir.join(c);
+            if p.is_file() {
+                return Ok(p);
+            }
+        }
+    }
+    Err(format!(
+        "no program for renderer {name:?}: looked for {} next to {} and on PATH",
+        candidates.join(" and "),
+        here.file_name().map_or("this program".into(), |n| n.to_string_lossy().into_owned())
+    ))
+}
+
 impl SceneMeta {
     /// Reads a scene directory's metadata (or the file itself) and checks it
     /// against the scene file.

@@ -1,0 +1,110 @@
+//! `deploy/serve.sh`, the script README tells users to run, end to end:
+//! server and runner from the script, its relative data directory, real
+//! Docker and real git. The service answers before the runner is ready;
+//! the C++ box filter goes from push to its private results page. Options
+//! keep it small for CI: the debug build the tests already made, one scene
+//! at 1 and 4 spp, and a port of its own. Prints the times (see README).
+
+mod common;
+
+use common::*;
+use std::os::unix::process::CommandExt;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// `bash deploy/serve.sh` in its own process group, and what it printed.
+struct Serve(Captured);
+
+impl Serve {
+    fn start(env: &[(&str, String)]) -> Serve {
+        let mut command = Command::new("bash");
+        command.arg("deploy/serve.sh").current_dir(workspace()).process_group(0);
+        for (key, _) in std::env::vars() {
+            if key.starts_with("FBKSD_") {
+                command.env_remove(key);
+            }
+        }
+        for (key, value) in env {
+            command.env(key, value);
+        }
+        Serve(Captured::spawn(command))
+    }
+
+    fn output(&self) -> String {
+        self.0.output()
+    }
+
+    /// Stops it as Ctrl-C would (SIGINT to its process group); whether it ended in time.
+    fn interrupt(&mut self) -> bool {
+        unsafe { libc::kill(-(self.0.child.id() as i32), libc::SIGINT) };
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while Instant::now() < deadline {
+            if self.0.child.try_wait().ok().flatten().is_some() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        false
+    }
+}
+
+impl Drop for Serve {
+    fn drop(&mut self) {
+        unsafe { libc::kill(-(self.0.child.id() as i32), libc::SIGKILL) };
+        let _ = self.0.child.wait();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn serve_sh_takes_a_push_to_its_private_results_page() {
+    // A fresh, relative data directory under the workspace, as README's default is.
+    let data_rel = "target/serve-sh-test/fbksd-data";
+    let _ = std::fs::remove_dir_all(workspace().join("target/serve-sh-test"));
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let url = format!("http://127.0.0.1:{port}");
+    let started = Instant::now();
+    let mut serve = Serve::start(&[
+        ("FBKSD_PROFILE", "debug".into()),
+        ("FBKSD_DATA_DIR", data_rel.into()),
+        ("FBKSD_SERVER_BIND", format!("127.0.0.1:{port}")),
+        ("FBKSD_CI_SCENES", "experimental/sphere".into()),
+        ("FBKSD_CI_SPP", "1,4".into()),
+        ("FBKSD_CI_RUN_TIMEOUT", "60s".into()),
+        ("RUST_LOG", "info".into()),
+    ]);
+    serve.0.line_with(&format!("FBKSD server: {url}"), Duration::from_secs(300));
+    let answered = started.elapsed();
+    let home = reqwest::get(format!("{url}/")).await.unwrap().text().await.unwrap();
+    assert!(home.contains("How to submit a technique"), "the empty board says how to submit:\n{home}");
+
+    let server = TestServer::at(url.clone(), workspace().join(data_rel).join("outbox"));
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "box-filter-cpp", "private").await;
+    let repo = technique_repository("box-filter-cpp");
+    let remote = server.clone_url("box-filter-cpp", &ada.token);
+    let (pushed, output) = push(repo.path(), &remote, &["FBKSD_RUN"]);
+    assert!(pushed, "{output}");
+    assert!(output.contains("remote: FBKSD: benchmark of main at"), "{output}");
+    let pushed_at = Instant::now();
+
+    let job = newest_job(&server, &ada, "box-filter-cpp", "benchmark").await;
+    let ended = finished_job(&server, &ada, &job, Duration::from_secs(900)).await;
+    let log = log_text(&server, &ada, &job).await;
+    assert_eq!(ended["state"], "succeeded", "{ended}\n{log}\nserve.sh:\n{}", serve.output());
+    let private = private_results_url(&log);
+    assert!(private.starts_with(&format!("{url}/results/")), "{private}");
+    let page = ada.browser.get(&private).send().await.unwrap();
+    assert_eq!(page.status(), 200);
+    let page = page.text().await.unwrap();
+    assert!(page.contains("sphere") && page.contains("Box filter"), "the private page shows the run:\n{page}");
+    assert_eq!(reqwest::get(&private).await.unwrap().status(), 404, "and only to its owner");
+    eprintln!(
+        "FIGURE serve.sh: answered {:.1} s after start; push (FBKSD_RUN) to private results {:.1} s",
+        answered.as_secs_f64(),
+        pushed_at.elapsed().as_secs_f64()
+    );
+
+    // Ctrl-C stops the server and the runner.
+    assert!(serve.interrupt(), "serve.sh did not stop on Ctrl-C:\n{}", serve.output());
+    assert!(std::net::TcpStream::connect(("127.0.0.1", port)).is_err(), "the server still answers");
+}
