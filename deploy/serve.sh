@@ -39,22 +39,27 @@ fi
 token=$(cat "$token_file")
 
 server="" runner=""
+# The runner first (it removes its containers), then the server. No `set -e`
+# here: a process that has already ended must not stop the stopping.
 stop() {
     trap - EXIT INT TERM
-    [ -n "$runner" ] && kill "$runner" 2>/dev/null
-    [ -n "$server" ] && kill "$server" 2>/dev/null
-    wait
+    set +e
+    if [ -n "$runner" ]; then kill -TERM "$runner" 2>/dev/null; wait "$runner" 2>/dev/null; fi
+    if [ -n "$server" ]; then kill -TERM "$server" 2>/dev/null; wait "$server" 2>/dev/null; fi
 }
-trap stop EXIT INT TERM
+trap 'stop; exit 130' INT
+trap 'stop; exit 143' TERM
+trap stop EXIT
 
 echo "serve: building the server" >&2
 build -p fbksd-server
 FBKSD_SERVER_DATA_DIR="$data" FBKSD_SERVER_RUNNER_REGISTRATION_TOKEN="$token" "$bin/fbksd-server" &
 server=$!
 bind=${FBKSD_SERVER_BIND:-127.0.0.1:8096}
-for _ in $(seq 100); do
-    python3 -c 'import socket,sys; h,p=sys.argv[1].rsplit(":",1); socket.create_connection((h,int(p)),1)' "$bind" 2>/dev/null && break
+for attempt in $(seq 150); do
+    python3 -c 'import socket,sys; h,p=sys.argv[1].rsplit(":",1); socket.create_connection((h.strip("[]"),int(p)),1)' "$bind" 2>/dev/null && break
     kill -0 "$server" 2>/dev/null || { echo "serve: the server stopped" >&2; exit 1; }
+    [ "$attempt" -lt 150 ] || { echo "serve: the server does not answer at $bind after 30 s" >&2; exit 1; }
     sleep 0.2
 done
 
@@ -66,8 +71,9 @@ bash deploy/build-images.sh --bin-dir "$bin" --manifest "$data/images.json"
 # Cornell box); it makes the missing references before it takes jobs.
 : "${FBKSD_CI_SCENES:=experimental/black-ring,experimental/defocus-checkerboard,experimental/fireflies,experimental/mandelbrot,experimental/moving-bars,experimental/sin-bands,experimental/sphere,production-small/cornell-box}"
 export FBKSD_CI_SCENES
+export FBKSD_CI_SCENE_ROOT=${FBKSD_CI_SCENE_ROOT:-$(pwd)/scenes}
 "$bin/fbksd-ci" --server "http://$bind" --registration-token "$token" --work-dir "$data/ci" \
-    --images "$data/images.json" --scene-root "$(pwd)/scenes" &
+    --images "$data/images.json" &
 runner=$!
 echo "serve: runner started; it makes the references its scenes lack before it takes jobs (see the home page)" >&2
 wait -n "$server" "$runner"

@@ -18,12 +18,22 @@ async fn main() -> anyhow::Result<()> {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
-    let runner = Runner::start(cli.config).await?;
-    runner
-        .run(async {
-            let _ = tokio::signal::ctrl_c().await;
-            tracing::info!("interrupted: stopping");
-        })
-        .await;
+    // Ctrl-C or a TERM (deploy/serve.sh's stop) ends the runner cleanly, also
+    // while it starts: dropping the start kills a reference being made.
+    let shutdown = async {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            .expect("a SIGTERM handler can be installed");
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => {}
+            _ = term.recv() => {}
+        }
+        tracing::info!("interrupted: stopping");
+    };
+    tokio::pin!(shutdown);
+    let runner = tokio::select! {
+        runner = Runner::start(cli.config) => runner?,
+        () = &mut shutdown => return Ok(()),
+    };
+    runner.run(shutdown).await;
     Ok(())
 }

@@ -56,9 +56,14 @@ pub async fn make_missing_references(
             fbksd_manager::scenes::ReferenceMethod::Render { spp } => format!("{spp} spp"),
             fbksd_manager::scenes::ReferenceMethod::ClosedForm { formula } => format!("closed form {formula}"),
         };
-        let status =
-            format!("reference {} of {}: {rel} ({}×{}, {budget})", i + 1, missing.len(), meta.width, meta.height);
-        tracing::info!("making the {status}");
+        let status = format!(
+            "making reference {} of {}: {rel} ({}×{}, {budget})",
+            i + 1,
+            missing.len(),
+            meta.width,
+            meta.height
+        );
+        tracing::info!("{status}");
         let program = fbksd_manager::scenes::renderer_program(&meta.renderer)
             .map_err(|e| anyhow::anyhow!("scene pool: the reference of {rel}: {e}"))?;
         let mut child = tokio::process::Command::new(&program)

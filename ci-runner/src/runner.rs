@@ -109,7 +109,9 @@ impl Runner {
             machine.cpu_model,
             machine.cpuset
         );
-        api.status(&credentials.token, None).await?;
+        if let Err(e) = api.status(&credentials.token, None).await {
+            tracing::warn!("telling the server this runner is ready: {e}");
+        }
         let runner = (credentials.id.clone(), config.runner_name());
         Ok(Runner {
             ctx: JobContext { config, api, sandbox, images, machine, scenes, runner, rendezvous_parent },

@@ -60,6 +60,16 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
     // A fresh, relative data directory under the workspace, as README's default is.
     let data_rel = "target/serve-sh-test/fbksd-data";
     let _ = std::fs::remove_dir_all(workspace().join("target/serve-sh-test"));
+    // The scene without its reference, so the runner makes it (other tests share the workspace's).
+    let scene_root = workspace().join("target/serve-sh-test/scenes");
+    let sphere = scene_root.join("experimental/sphere");
+    std::fs::create_dir_all(&sphere).unwrap();
+    for entry in std::fs::read_dir(workspace().join("scenes/experimental/sphere")).unwrap() {
+        let path = entry.unwrap().path();
+        if !path.file_name().unwrap().to_string_lossy().starts_with("reference") {
+            std::fs::copy(&path, sphere.join(path.file_name().unwrap())).unwrap();
+        }
+    }
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let url = format!("http://127.0.0.1:{port}");
     let started = Instant::now();
@@ -68,6 +78,7 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
         ("FBKSD_DATA_DIR", data_rel.into()),
         ("FBKSD_SERVER_BIND", format!("127.0.0.1:{port}")),
         ("FBKSD_CI_SCENES", "experimental/sphere".into()),
+        ("FBKSD_CI_SCENE_ROOT", scene_root.display().to_string()),
         ("FBKSD_CI_SPP", "1,4".into()),
         ("FBKSD_CI_RUN_TIMEOUT", "60s".into()),
         ("RUST_LOG", "info".into()),
@@ -104,7 +115,13 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
         pushed_at.elapsed().as_secs_f64()
     );
 
+    // The runner made the missing reference before it took the job.
+    assert!(serve.output().contains("making reference 1 of 1: experimental/sphere"), "{}", serve.output());
+    assert!(sphere.join("reference.exr").is_file());
+
     // Ctrl-C stops the server and the runner.
     assert!(serve.interrupt(), "serve.sh did not stop on Ctrl-C:\n{}", serve.output());
     assert!(std::net::TcpStream::connect(("127.0.0.1", port)).is_err(), "the server still answers");
+    let left = Command::new("pgrep").args(["-f", "target/serve-sh-test"]).output().unwrap();
+    assert!(left.stdout.is_empty(), "processes left: {}", String::from_utf8_lossy(&left.stdout));
 }

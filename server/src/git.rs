@@ -135,7 +135,9 @@ fn with_remote_messages(output: Vec<u8>, messages: &[String]) -> Vec<u8> {
     let mut answer = output[..at].to_vec();
     for message in messages {
         for line in message.lines() {
-            let line = &line[..line.len().min(60_000)];
+            // A packet holds at most 65516 bytes of data; a char boundary keeps it text.
+            let end = (0..=line.len().min(60_000)).rev().find(|&i| line.is_char_boundary(i)).unwrap_or(0);
+            let line = &line[..end];
             answer.extend(format!("{:04x}", 4 + 1 + line.len() + 1).as_bytes());
             answer.push(2);
             answer.extend(line.as_bytes());

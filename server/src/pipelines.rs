@@ -63,7 +63,9 @@ while [ "$i" -lt "${{GIT_PUSH_OPTION_COUNT:-0}}" ]; do
         FBKSD_PUBLISH=*)
             requests=$((requests + 1))
             key="${{option#FBKSD_PUBLISH=}}"
-            if ! printf '%s' "$key" | grep -Eqi '^ *[0-9a-f]{{8}}-?[0-9a-f]{{4}}-?[0-9a-f]{{4}}-?[0-9a-f]{{4}}-?[0-9a-f]{{12}} *$'; then
+            # grep matches line by line: the length check keeps a value with a newline out.
+            if ! {{ [ "${{#key}}" -eq 36 ] || [ "${{#key}}" -eq 32 ]; }} ||
+               ! printf '%s' "$key" | grep -Eqi '^([0-9a-f]{{32}}|[0-9a-f]{{8}}-[0-9a-f]{{4}}-[0-9a-f]{{4}}-[0-9a-f]{{4}}-[0-9a-f]{{12}})$'; then
                 echo "FBKSD: {PUBLISH_NEEDS}, not '$key'"
                 exit 1
             fi ;;
@@ -91,15 +93,18 @@ impl Request {
         for (name, value) in variables {
             let next = match name {
                 "FBKSD_RUN" => Request::Run,
-                "FBKSD_PUBLISH" => match uuid::Uuid::parse_str(value.trim()) {
-                    Ok(key) => Request::Publish(key),
-                    Err(_) => {
-                        return Err(ApiError::bad_request(
-                            "invalid_variable",
-                            format!("{PUBLISH_NEEDS}, not {value:?}"),
-                        ))
+                // The hook's forms only: 32 hex digits, or 8-4-4-4-12.
+                "FBKSD_PUBLISH" => {
+                    match uuid::Uuid::parse_str(value).ok().filter(|_| [32, 36].contains(&value.len())) {
+                        Some(key) => Request::Publish(key),
+                        None => {
+                            return Err(ApiError::bad_request(
+                                "invalid_variable",
+                                format!("{PUBLISH_NEEDS}, not {value:?}"),
+                            ))
+                        }
                     }
-                },
+                }
                 other => {
                     return Err(ApiError::bad_request(
                         "unknown_variable",
@@ -134,7 +139,8 @@ impl Request {
 pub enum Source {
     /// `git push` (the push has landed: problems become failed jobs).
     Push,
-    /// The API or a form (problems are refused before anything is written).
+    /// The API or a form (bad variables and quotas are refused before
+    /// anything is written; a broken repository is a failed job).
     Api,
     /// A new leaderboard season re-runs a published technique.
     Season,
@@ -273,7 +279,8 @@ pub async fn start(
     .bind(state.config.max_attempts as i64)
     .bind(season)
     .bind((source == Source::Season) as i64)
-    .bind((kind == JobKind::Benchmark && job_state != "cancelled" && source != Source::Season) as i64)
+    // Only runs that were queued use up the day's runs.
+    .bind((kind == JobKind::Benchmark && job_state == "queued" && source != Source::Season) as i64)
     .bind(now)
     .bind(finished)
     .execute(&mut *tx)
@@ -304,7 +311,7 @@ pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> Strin
         ),
         ("queued", _) => format!("FBKSD: {what} queued: {url}"),
         ("failed", _) => format!("FBKSD: {what} failed: {first_line}\nFBKSD: details: {url}"),
-        ("cancelled", _) => format!("FBKSD: {what} not run: {first_line}\nFBKSD: details: {url}"),
+        ("cancelled", _) => format!("FBKSD: {what}: {first_line}\nFBKSD: details: {url}"),
         (_, _) => format!("FBKSD: {first_line}"),
     }
 }

@@ -197,4 +197,18 @@ async fn pushes_start_pipelines_on_the_documented_path() {
     let head = String::from_utf8_lossy(&git(repo.path(), &["rev-parse", "HEAD~1"]).stdout).trim().to_string();
     let remote_head = String::from_utf8_lossy(&git(repo.path(), &["ls-remote", &remote, "main"]).stdout).to_string();
     assert!(remote_head.starts_with(&head), "refused pushes move no ref: {remote_head} vs {head}");
+
+    // A repository an older server set up with a relative hooks path is repaired at the next start.
+    drop(process);
+    assert!(git(&repository, &["config", "--file", &config, "core.hooksPath", "fbksd-data/git-hooks"])
+        .status
+        .success());
+    let process = ServerProcess::start(dir.path());
+    let url = word_after(&process.line_with("FBKSD server: "), "FBKSD server: ");
+    let server = TestServer::at(url, dir.path().join("fbksd-data/outbox"));
+    let hooks = git(&repository, &["config", "--file", &config, "core.hooksPath"]);
+    assert!(std::path::Path::new(String::from_utf8_lossy(&hooks.stdout).trim()).is_absolute());
+    let (pushed, output) = push(repo.path(), &server.clone_url("box", &ada.token), &[]);
+    assert!(pushed, "{output}");
+    assert_eq!(job_links(&output, &server).len(), 1, "the repaired repository starts a build: {output}");
 }

@@ -186,8 +186,11 @@ on_both_databases!(a_newcomer_is_told_how_to_submit_and_what_is_being_prepared, 
         .unwrap();
     assert_eq!(status.status(), 204);
     let (_, page) = home(anonymous.clone()).await;
-    assert!(page.contains("Runner r1: making reference 2 of 8: experimental/sphere"), "{page}");
+    assert!(page.contains("The runners are getting ready") && !page.contains("r1"), "anonymous: no details: {page}");
     assert!(page.contains("http-equiv=\"refresh\"") && !page.contains("No runner is connected"), "{page}");
+    let ada = server.user("ada@example.org").await;
+    let (_, page) = home(ada.browser.clone()).await;
+    assert!(page.contains("Runner r1: making reference 2 of 8: experimental/sphere"), "{page}");
     reqwest::Client::new()
         .post(format!("{}/api/v1/runners/status", server.url))
         .bearer_auth(&runner.token)
@@ -199,7 +202,6 @@ on_both_databases!(a_newcomer_is_told_how_to_submit_and_what_is_being_prepared, 
     assert!(!page.contains("Getting ready"), "a ready runner leaves nothing to say: {page}");
 
     // Logged in: the clone URL carries a user name; an error page keeps the header.
-    let ada = server.user("ada@example.org").await;
     server.create_project(&ada, "private-filter", "private").await;
     let (_, page) =
         text(ada.browser.get(format!("{}/projects/private-filter", server.url)).send().await.unwrap()).await;
@@ -217,9 +219,12 @@ on_both_databases!(a_newcomer_is_told_how_to_submit_and_what_is_being_prepared, 
     common::upload_results(&runner, &job, 1.0).await;
     let result =
         job.finish(&runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string();
-    let (status, _) =
+    let (status, hidden) =
         text(anonymous.get(format!("{}/projects/private-filter", server.url)).send().await.unwrap()).await;
     assert_eq!(status, 404, "nothing published yet: nothing to show");
+    let (_, missing) =
+        text(anonymous.get(format!("{}/projects/private-filtex", server.url)).send().await.unwrap()).await;
+    assert_eq!(hidden.replace("private-filter", "private-filtex"), missing, "a private name is not given away");
     ada.api(Method::POST, format!("{}/api/v1/results/{result}/publish", server.url)).send().await.unwrap();
     let (_, board) = home(anonymous.clone()).await;
     assert!(board.contains("Box filter (Python)") && board.contains("href=\"/projects/private-filter\""), "{board}");

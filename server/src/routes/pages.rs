@@ -185,8 +185,9 @@ fn how_to(state: &AppState, user: Option<&User>, project: Option<&str>) -> HowTo
 }
 
 /// What the service is preparing before jobs can run, one line per
-/// runner, or that no runner is connected.
-async fn preparation(state: &AppState) -> Result<Vec<String>, sqlx::Error> {
+/// runner, or that no runner is connected. Runners' names and what they
+/// say are for logged-in users; others learn only that jobs will wait.
+async fn preparation(state: &AppState, user: Option<&User>) -> Result<Vec<String>, sqlx::Error> {
     let now = crate::now_ms();
     let runners = crate::runners::all(&state.pool).await?;
     let connected: Vec<_> = runners.iter().filter(|r| r.healthy(&state.config, now)).collect();
@@ -195,15 +196,24 @@ async fn preparation(state: &AppState) -> Result<Vec<String>, sqlx::Error> {
                         (deploy/serve.sh starts one as soon as it has built its images)."
             .into()]);
     }
-    Ok(connected
+    let preparing: Vec<String> = connected
         .iter()
         .filter_map(|r| {
             let status = r.preparing.as_ref()?;
             let seconds = (now - r.preparing_since.unwrap_or(now)).max(0) as u64 / 1000;
             let elapsed = humantime::format_duration(std::time::Duration::from_secs(seconds));
-            Some(format!("Runner {}: {status} (for {elapsed}); jobs wait in the queue meanwhile.", r.name))
+            Some(format!("Runner {}: {status}, for {elapsed}; jobs wait in the queue meanwhile.", r.name))
         })
-        .collect())
+        .collect();
+    Ok(match (user, preparing.len()) {
+        (_, 0) => Vec::new(),
+        (Some(_), _) => preparing,
+        (None, n) if n == connected.len() => {
+            vec!["The runners are getting ready (log in to see what they prepare): jobs wait in the queue meanwhile."
+                .into()]
+        }
+        (None, _) => Vec::new(),
+    })
 }
 
 /// Unix ms as a UTC date and time.
@@ -233,8 +243,8 @@ pub async fn static_file(Path(name): Path<String>) -> Response {
 
 /// `GET /`: the leaderboard, with how to submit while it is empty and what
 /// the service is still preparing.
-pub async fn home(State(state): State<AppState>, Visitor(nav): Visitor) -> PageResult {
-    board_page(&state, nav, BoardQuery::default(), None).await
+pub async fn home(State(state): State<AppState>, Visitor(nav): Visitor, Query(query): Query<BoardQuery>) -> PageResult {
+    board_page(&state, nav, query, None, true).await
 }
 
 // ---------------------------------------------------------------- accounts
@@ -533,12 +543,8 @@ pub async fn project_page(
     let info = if public_only {
         // The newest published description; no published result, no page.
         let Some(set) = sets.iter().max_by_key(|r| r.published_at) else {
-            return Err(ApiError::new(
-                StatusCode::NOT_FOUND,
-                "not_found",
-                format!("no project {name:?} that you can see"),
-            )
-            .into());
+            // The same answer as for no project at all: a private name stays private.
+            return Err(projects::not_found(&name).into());
         };
         serde_json::from_value::<fbksd_manager::technique::TechniqueInfo>(set.info.clone()).ok()
     } else {
@@ -703,7 +709,7 @@ struct BoardPage {
     groups: Vec<GroupView>,
     /// Shown on the public board while it is empty.
     how_to: Option<HowTo>,
-    /// What the service still prepares (public board only).
+    /// What the service still prepares (home page only).
     preparing: Vec<String>,
 }
 
@@ -712,6 +718,7 @@ async fn board_page(
     nav: Nav,
     query: BoardQuery,
     result: Option<crate::results::ResultSet>,
+    home: bool,
 ) -> PageResult {
     let query = BoardQuery { tag: query.tag.filter(|t| !t.is_empty()), ..query };
     let board = leaderboard::build(&state.pool, &state.boards, &query, result.as_ref()).await?;
@@ -769,11 +776,10 @@ async fn board_page(
         })
         .collect();
     let tag = board.tag.clone().unwrap_or_default();
-    let (how_to, preparing) = match &result {
-        None if standings.is_empty() => (Some(how_to(state, nav.user.as_ref(), None)), preparation(state).await?),
-        None => (None, preparation(state).await?),
-        Some(_) => (None, Vec::new()),
-    };
+    // The home page alone says what is being prepared: the leaderboard's
+    // own address stays one cached board and no query.
+    let how_to = (result.is_none() && standings.is_empty()).then(|| how_to(state, nav.user.as_ref(), None));
+    let preparing = if home { preparation(state, nav.user.as_ref()).await? } else { Vec::new() };
     let page = BoardPage {
         how_to,
         preparing,
@@ -799,7 +805,7 @@ pub async fn leaderboard_page(
     Visitor(nav): Visitor,
     Query(query): Query<BoardQuery>,
 ) -> PageResult {
-    board_page(&state, nav, query, None).await
+    board_page(&state, nav, query, None, false).await
 }
 
 /// `GET /results/{id}`: a result set beside every published technique.
@@ -810,7 +816,7 @@ pub async fn result_page(
     Query(query): Query<BoardQuery>,
 ) -> PageResult {
     let set = super::results::visible_set(&state, &id, nav.user.as_ref()).await?;
-    board_page(&state, nav, query, Some(set)).await
+    board_page(&state, nav, query, Some(set), false).await
 }
 
 /// `POST /results/{id}/{action}`: publish, unpublish or discard (owner only).
