@@ -103,6 +103,8 @@ impl Pushed {
         let mut response = Response::new(Body::from(with_remote_messages(self.output, messages)));
         *response.status_mut() = self.status;
         *response.headers_mut() = self.headers;
+        // The body grew: its length is the new one, not git's.
+        response.headers_mut().remove(axum::http::header::CONTENT_LENGTH);
         response
     }
 }
@@ -200,7 +202,9 @@ impl GitHost {
         }
         for entry in std::fs::read_dir(&root)? {
             let repository = entry?.path();
-            if repository.extension().is_some_and(|e| e == "git") {
+            let config = std::fs::read_to_string(repository.join("config")).unwrap_or_default();
+            let pointed = config.lines().any(|l| l.trim() == format!("hooksPath = {}", hooks.display()));
+            if repository.extension().is_some_and(|e| e == "git") && !pointed {
                 let set = std::process::Command::new("git")
                     .arg("-C")
                     .arg(&repository)
