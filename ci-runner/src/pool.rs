@@ -21,7 +21,8 @@ pub struct PoolScene {
     pub rel: String,
     /// Its metadata (with the directory on this machine).
     pub meta: SceneMeta,
-    /// SHA-256 of its metadata, scene file and the files beside the scene file.
+    /// Its digest ([`fbksd_manager::scenes::scene_digest`]: the files beside
+    /// the scene file), the same that the renderers' reference caches use.
     pub scene_hash: String,
     /// SHA-256 of its reference image.
     pub reference_hash: String,
@@ -103,22 +104,10 @@ pub fn load(root: &Path, dirs: &[String]) -> anyhow::Result<Vec<PoolScene>> {
                 dir.display()
             )
         })?;
-        let mut hasher = Sha256::new();
-        hasher.update(std::fs::read(dir.join(fbksd_manager::scenes::META_FILE))?);
-        let scene_file = meta.scene_file();
-        let scene_dir = scene_file.parent().map(Path::to_path_buf).unwrap_or_else(|| dir.clone());
-        let mut beside: Vec<PathBuf> = std::fs::read_dir(&scene_dir)?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file() && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("reference")))
-            .collect();
-        beside.sort();
-        for file in beside {
-            hasher.update(file.file_name().unwrap().as_encoded_bytes());
-            hasher.update(std::fs::read(&file)?);
-        }
+        let scene_hash = fbksd_manager::scenes::scene_digest(&meta.scene_file())?;
         scenes.push(PoolScene {
             rel: rel.clone(),
-            scene_hash: format!("sha256:{:x}", hasher.finalize()),
+            scene_hash,
             reference_hash: format!("sha256:{:x}", Sha256::digest(&reference_bytes)),
             meta,
         });

@@ -6,7 +6,9 @@
 //! (the metadata's `render` method), rendered as two independent halves;
 //! the note gives the estimated RMS error of their mean, `rms(a − b) / 2`,
 //! beside the mean pixel value to read it against. A cached reference is
-//! rebuilt when the renderer version, the spp or the scene's files change.
+//! rebuilt when the renderer version, the spp or the scene's files change
+//! (the rule every renderer shares:
+//! [`fbksd_manager::scenes::current_reference_note`]).
 
 use crate::render::render_image;
 use anyhow::{bail, Context};
@@ -29,25 +31,10 @@ pub struct ReferenceNote {
     pub repaired_samples: u64,
     /// What made it; a reference made by another version is rebuilt.
     pub generator: String,
-    /// A digest of the scene's files; a reference of other scene files is rebuilt.
+    /// The scene's digest ([`fbksd_manager::scenes::scene_digest`]); a
+    /// reference of other scene files is rebuilt.
     #[serde(default)]
     pub scene_digest: String,
-}
-
-/// A digest (FNV-1a, 64 bits) of every file beside the scene file but
-/// references, in name order: the scene as the renderer reads it.
-pub fn scene_digest(scene_file: &std::path::Path) -> anyhow::Result<String> {
-    let dir = scene_file.parent().unwrap_or(std::path::Path::new("."));
-    let mut files: Vec<_> = std::fs::read_dir(dir)?.map(|e| e.map(|e| e.path())).collect::<Result<_, _>>()?;
-    files.retain(|p| p.is_file() && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("reference")));
-    files.sort();
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for f in files {
-        for b in f.file_name().unwrap_or_default().as_encoded_bytes().iter().chain(&std::fs::read(&f)?) {
-            h = (h ^ *b as u64).wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    Ok(format!("{h:016x}"))
 }
 
 /// Bumped whenever rendering changes what a converged image is.
@@ -79,11 +66,10 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         bail!("{}: the Embree renderer makes references by rendering (\"method\": \"render\")", meta.name);
     };
     let spp = spp_override.unwrap_or(spp).max(2);
-    let digest = scene_digest(&meta.scene_file())?;
-    if !force && out.is_file() && note_file.is_file() {
-        let note: ReferenceNote = serde_json::from_slice(&std::fs::read(&note_file)?)?;
-        if note.generator == generator() && note.samples_per_pixel == spp && note.scene_digest == digest {
-            return Ok(note);
+    let digest = fbksd_manager::scenes::scene_digest(&meta.scene_file())?;
+    if !force {
+        if let Some(text) = fbksd_manager::scenes::current_reference_note(meta, &generator(), spp, &digest)? {
+            return Ok(serde_json::from_str(&text)?);
         }
     }
     let scene = crate::pbrt::load(&meta.scene_file()).with_context(|| format!("loading {}", meta.name))?;

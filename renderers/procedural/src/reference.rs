@@ -1,9 +1,10 @@
 //! Reference images of procedural scenes.
 //!
 //! A scene directory's `fbksd-scene.json` (see [`fbksd_manager::scenes`])
-//! says how its reference is made. References are built by `fbksd-procedural reference <dir>`, cached beside the scene
-//! (not committed), with a `reference.json` note saying how converged they
-//! are:
+//! says how its reference is made. References are built by
+//! `fbksd-procedural reference <dir>`, cached beside the scene (not
+//! committed) and rebuilt when the sampler, the budget or the scene's files
+//! change, with a `reference.json` note saying how converged they are:
 //!
 //! - `render`: the box filter of `spp` stratified samples per pixel, as two
 //!   independent halves; the note gives the estimated RMS error of their
@@ -37,6 +38,10 @@ pub struct ReferenceNote {
     /// made by another sampler is rebuilt.
     #[serde(default)]
     pub generator: String,
+    /// The scene's digest ([`fbksd_manager::scenes::scene_digest`]); a
+    /// reference of other scene files is rebuilt.
+    #[serde(default)]
+    pub scene_digest: String,
 }
 
 fn generator() -> String {
@@ -60,14 +65,22 @@ impl std::fmt::Display for ReferenceNote {
     }
 }
 
-/// Builds (or keeps) a scene's reference; returns its note.
+/// Builds (or keeps, by the shared rule of
+/// [`fbksd_manager::scenes::current_reference_note`]) a scene's reference;
+/// returns its note.
 pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
     let note_file = out.with_extension("json");
-    if !force && out.is_file() && note_file.is_file() {
-        let note: ReferenceNote = serde_json::from_slice(&std::fs::read(&note_file)?)?;
-        if note.generator == generator() {
-            return Ok(note);
+    let samples_per_pixel = match &meta.reference {
+        ReferenceMethod::Render { spp } => spp_override.unwrap_or(*spp).max(2),
+        ReferenceMethod::ClosedForm { .. } => spp_override.unwrap_or(256),
+    };
+    let digest = fbksd_manager::scenes::scene_digest(&meta.scene_file())?;
+    if !force {
+        if let Some(text) =
+            fbksd_manager::scenes::current_reference_note(meta, &generator(), samples_per_pixel, &digest)?
+        {
+            return Ok(serde_json::from_str(&text)?);
         }
     }
     let scene = Scene::load(&meta.scene_file()).map_err(anyhow::Error::msg)?;
@@ -83,8 +96,8 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
     }
     let started = Instant::now();
     let (image, samples_per_pixel, estimated_error) = match &meta.reference.clone() {
-        ReferenceMethod::Render { spp } => {
-            let spp = spp_override.unwrap_or(*spp).max(2);
+        ReferenceMethod::Render { .. } => {
+            let spp = samples_per_pixel;
             let a = render_image(&scene, spp / 2, 1_000_001).map_err(anyhow::Error::msg)?;
             let b = render_image(&scene, spp - spp / 2, 1_000_002).map_err(anyhow::Error::msg)?;
             let w = (spp / 2) as f64 / spp as f64;
@@ -94,7 +107,7 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
             (mean, spp, rms / 2.0)
         }
         ReferenceMethod::ClosedForm { formula } => {
-            let q = spp_override.unwrap_or(256) as u32;
+            let q = samples_per_pixel as u32;
             let fine = closed_form(formula, &scene, q)?;
             let coarse = closed_form(formula, &scene, q / 2)?;
             let change = fine.iter().zip(&coarse).map(|(a, b)| (a - b).abs() as f64).fold(0.0, f64::max);
@@ -110,6 +123,7 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         mean_value,
         seconds: started.elapsed().as_secs_f64(),
         generator: generator(),
+        scene_digest: digest,
     };
     std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
     Ok(note)

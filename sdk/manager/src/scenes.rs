@@ -76,6 +76,51 @@ pub struct SceneMeta {
 /// The metadata file's name.
 pub const META_FILE: &str = "fbksd-scene.json";
 
+/// A scene's digest, `sha256:<hex>`: every file beside the scene file but
+/// its references (`reference*`), names and contents in name order, which
+/// is the scene as a renderer reads it. One rule for the renderers'
+/// reference caches and for the runner's provenance.
+pub fn scene_digest(scene_file: &Path) -> std::io::Result<String> {
+    use sha2::{Digest, Sha256};
+    let dir = scene_file.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?.map(|e| e.map(|e| e.path())).collect::<Result<_, _>>()?;
+    files.retain(|p| p.is_file() && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("reference")));
+    files.sort();
+    let mut hasher = Sha256::new();
+    for file in files {
+        let name = file.file_name().unwrap_or_default().as_encoded_bytes().to_vec();
+        hasher.update((name.len() as u64).to_le_bytes());
+        hasher.update(&name);
+        let bytes = std::fs::read(&file)?;
+        hasher.update((bytes.len() as u64).to_le_bytes());
+        hasher.update(&bytes);
+    }
+    Ok(format!("sha256:{:x}", hasher.finalize()))
+}
+
+/// The one rule for cached references, shared by every renderer: the
+/// reference beside a scene is kept when it and its note (`reference.json`)
+/// exist and the note names the same `generator`, `samples_per_pixel` and
+/// `scene_digest` ([`scene_digest`]). Returns the note's text when it is kept.
+pub fn current_reference_note(
+    meta: &SceneMeta,
+    generator: &str,
+    samples_per_pixel: u64,
+    digest: &str,
+) -> std::io::Result<Option<String>> {
+    let reference = meta.reference_file();
+    let note_file = reference.with_extension("json");
+    if !reference.is_file() || !note_file.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&note_file)?;
+    let note: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+    let current = note["generator"] == generator
+        && note["samples_per_pixel"] == samples_per_pixel
+        && note["scene_digest"] == digest;
+    Ok(current.then_some(text))
+}
+
 /// The program of a renderer named in scene metadata: `fbksd-<name>` (or
 /// `fbksd-<name>-renderer`) next to the running program, else on PATH.
 pub fn renderer_program(name: &str) -> Result<PathBuf, String> {
