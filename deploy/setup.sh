@@ -51,6 +51,14 @@ if ! python3 -c "import numpy, skimage, flip_evaluator, mypy" >/dev/null 2>&1; t
         || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages "${PIP_PACKAGES[@]}"
 fi
 
+# The test command checks formatting and lints first.
+for tool in fmt clippy; do
+    if ! cargo "$tool" --version >/dev/null 2>&1; then
+        echo "setup: cargo $tool is missing: rustup component add $( [ $tool = fmt ] && echo rustfmt || echo clippy )" >&2
+        exit 1
+    fi
+done
+
 if ! cargo nextest --version >/dev/null 2>&1; then
     cargo install cargo-nextest --locked
 fi
