@@ -1,5 +1,5 @@
-//! HTML pages (askama templates in `server/templates`, static files in
-//! `server/static`): the leaderboard, private results pages, techniques,
+//! HTML pages (askama templates in `frontend/templates`, stylesheets and
+//! scripts in `frontend/static`, compiled in): the leaderboard, private results pages, techniques,
 //! jobs with their live log, access tokens and administration.
 //!
 //! Every form carries a CSRF token: logged-in forms the session's, the
@@ -234,8 +234,8 @@ fn number(value: Option<f64>) -> String {
 /// Static files, compiled in.
 pub async fn static_file(Path(name): Path<String>) -> Response {
     let (body, kind) = match name.as_str() {
-        "style.css" => (include_str!("../../static/style.css"), "text/css; charset=utf-8"),
-        "log.js" => (include_str!("../../static/log.js"), "text/javascript; charset=utf-8"),
+        "style.css" => (include_str!("../../../frontend/static/style.css"), "text/css; charset=utf-8"),
+        "log.js" => (include_str!("../../../frontend/static/log.js"), "text/javascript; charset=utf-8"),
         _ => return (StatusCode::NOT_FOUND, "no such file").into_response(),
     };
     ([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "public, max-age=3600")], body).into_response()
