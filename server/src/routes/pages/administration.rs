@@ -1,0 +1,105 @@
+//! The administration page and its forms.
+
+use super::*;
+
+struct RunnerRow {
+    name: String,
+    machine: String,
+    healthy: bool,
+    last_seen: String,
+    running_jobs: i64,
+}
+
+#[derive(Template)]
+#[template(path = "admin.html")]
+struct AdminPage {
+    nav: Nav,
+    runners: Vec<RunnerRow>,
+    jobs: Vec<JobRow>,
+    season: i64,
+}
+
+fn admin_of(nav: &Nav) -> Result<&User, PageError> {
+    match &nav.user {
+        Some(u) if u.is_admin => Ok(u),
+        Some(_) => Err(ApiError::forbidden("not_admin", "only administrators can see this page").into()),
+        None => Err(ApiError::unauthorized("log in first").into()),
+    }
+}
+
+/// `GET /admin`.
+pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) -> PageResult {
+    admin_of(&nav)?;
+    let now = crate::now_ms();
+    let runners = crate::runners::all(&state.pool)
+        .await?
+        .into_iter()
+        .map(|r| RunnerRow {
+            healthy: r.healthy(&state.config, now),
+            name: r.name,
+            machine: r.machine.to_string(),
+            last_seen: when(r.last_seen_at),
+            running_jobs: r.running_jobs,
+        })
+        .collect();
+    let jobs = crate::jobs::all(&state.pool, 200).await?.iter().map(job_row).collect();
+    let season = crate::results::current_season(&state.pool).await?;
+    Ok(render(&AdminPage { nav, runners, jobs, season }))
+}
+
+/// `POST /admin/jobs/{id}/requeue`.
+pub async fn admin_requeue(
+    State(state): State<AppState>,
+    visitor: Visitor,
+    Path(id): Path<String>,
+    Form(form): Form<CsrfForm>,
+) -> PageResult {
+    let user = visitor.check(&form.csrf_token)?;
+    admin_of(&visitor.0)?;
+    crate::jobs::requeue(&state.pool, &id, &user.email).await?;
+    state.job_queued.notify_waiters();
+    Ok(Redirect::to("/admin").into_response())
+}
+
+/// The hide form.
+#[derive(Deserialize)]
+pub struct HideForm {
+    csrf_token: String,
+    result_id: String,
+    reason: String,
+}
+
+/// `POST /admin/hide`.
+pub async fn admin_hide(State(state): State<AppState>, visitor: Visitor, Form(form): Form<HideForm>) -> PageResult {
+    visitor.check(&form.csrf_token)?;
+    admin_of(&visitor.0)?;
+    if form.reason.trim().is_empty() {
+        return Err(ApiError::bad_request("missing_reason", "say why the result set is hidden").into());
+    }
+    if !crate::results::set_hidden(&state.pool, form.result_id.trim(), Some(form.reason.trim())).await? {
+        return Err(
+            ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {}", form.result_id)).into()
+        );
+    }
+    Ok(Redirect::to("/admin").into_response())
+}
+
+/// The new-season form.
+#[derive(Deserialize)]
+pub struct SeasonForm {
+    csrf_token: String,
+    note: String,
+}
+
+/// `POST /admin/seasons`.
+pub async fn admin_season(State(state): State<AppState>, visitor: Visitor, Form(form): Form<SeasonForm>) -> PageResult {
+    visitor.check(&form.csrf_token)?;
+    admin_of(&visitor.0)?;
+    let started = crate::routes::admin::start_season(&state, &form.note).await?;
+    let text = format!(
+        "Season {} started; {} techniques queued again.",
+        started["season"],
+        started["queued"].as_array().map_or(0, Vec::len)
+    );
+    Ok(message(visitor.0, "New season", text))
+}
