@@ -13,7 +13,7 @@
 #
 # Options, as environment variables:
 #   FBKSD_DATA_DIR   the data directory (default fbksd-data, relative to the repository)
-#   FBKSD_PROFILE    release (default) or debug (reuses the test build: CI)
+#   FBKSD_PROFILE    release (default), or debug: the binaries of `cargo build --workspace`, as they are (CI)
 #   FBKSD_SERVER_*   the server's settings, e.g. FBKSD_SERVER_BIND=127.0.0.1:9000
 #   FBKSD_CI_*       the runner's flags, e.g. FBKSD_CI_SCENES=experimental/sphere FBKSD_CI_SPP=1,4
 set -euo pipefail
@@ -25,8 +25,15 @@ data=$(cd "$data" && pwd)
 
 case "${FBKSD_PROFILE:-release}" in
     release) build() { cargo build --release --locked "$@"; }; bin=target/release ;;
-    # The test build is of the whole workspace: building it again is a no-op.
-    debug) build() { cargo build --locked --workspace; }; bin=target/debug ;;
+    # The binaries the test build made, as they are: no cargo here, since a
+    # rebuild would re-link libraries other tests are using at that moment.
+    debug)
+        build() {
+            for program in fbksd-server fbksd-ci fbksd-procedural fbksd-embree libfbksd.so lib_native.so; do
+                [ -f "target/debug/$program" ] || { echo "serve: target/debug/$program is missing: cargo build --workspace first" >&2; exit 1; }
+            done
+        }
+        bin=target/debug ;;
     *) echo "serve: FBKSD_PROFILE must be release or debug, not '$FBKSD_PROFILE'" >&2; exit 1 ;;
 esac
 bin=$(pwd)/$bin
