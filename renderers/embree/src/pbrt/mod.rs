@@ -3,7 +3,8 @@
 //!
 //! - [`lexer`]: tokens with file and line.
 //! - [`params`]: typed parameter lists; an unused parameter is an error.
-//! - [`parser`]: directives, the graphics state, and the scene they build.
+//! - [`parser`]: directives and the graphics state they change.
+//! - `build`: the scene they build (shapes, materials, textures, camera).
 //! - [`ply`]: meshes for `plymesh`.
 //!
 //! Supported: `Include`/`Import`; `LookAt`, `Translate`, `Scale`,
@@ -19,6 +20,7 @@
 //! "diffuse"`; `LightSource "infinite"` (constant). Anything else is an
 //! error naming the file and line.
 
+mod build;
 pub mod lexer;
 pub mod params;
 pub mod parser;
