@@ -7,7 +7,9 @@
 //! A 410 means the job is no longer this runner's (cancelled, finished, or
 //! requeued after a lost lease): the runner stops working on it.
 
-use serde::Deserialize;
+use fbksd_exchange::runner_api::{
+    Claim, ClaimRequest, Finished, Outcome, Registration, RunnerCredentials, StatusReport, Upload,
+};
 use std::time::Duration;
 
 /// How long a job's calls keep trying while the server is unreachable.
@@ -39,45 +41,6 @@ pub enum ApiError {
         /// The last error.
         last: String,
     },
-}
-
-/// A runner's identity on the server.
-#[derive(Debug, Clone, serde::Serialize, Deserialize)]
-pub struct RunnerCredentials {
-    /// Runner id.
-    pub id: String,
-    /// Runner token (`fbksdr_…`).
-    pub token: String,
-}
-
-/// A claimed job, as the server describes it.
-#[derive(Debug, Clone, Deserialize)]
-pub struct Claim {
-    /// The job row.
-    pub job: ClaimedJob,
-    /// The job token (`fbksdj_…`), valid for this attempt only.
-    pub token: String,
-    /// Clone URL of the technique's repository.
-    pub repository: String,
-    /// The commit to build.
-    pub commit: String,
-    /// Lease length: heartbeat well within it.
-    pub lease_seconds: u64,
-    /// The server's public URL.
-    pub results_url: String,
-}
-
-/// The fields of a job the runner uses.
-#[derive(Debug, Clone, Deserialize)]
-pub struct ClaimedJob {
-    /// Job id.
-    pub id: String,
-    /// Project (technique) name.
-    pub project: String,
-    /// `build` or `benchmark`.
-    pub kind: String,
-    /// Attempt number (1 for the first claim).
-    pub attempts: i64,
 }
 
 /// The server's runner API.
@@ -139,7 +102,8 @@ impl Api {
         name: &str,
         machine: &serde_json::Value,
     ) -> Result<RunnerCredentials, ApiError> {
-        let body = serde_json::json!({ "registration_token": registration_token, "name": name, "machine": machine });
+        let body =
+            Registration { registration_token: registration_token.into(), name: name.into(), machine: machine.clone() };
         let response =
             self.send("registration", JOB_PATIENCE, || self.http.post(self.url("runners")).json(&body)).await?;
         response.json().await.map_err(|e| unreadable("registration", e))
@@ -147,7 +111,7 @@ impl Api {
 
     /// Asks for a job, waiting up to `wait_seconds` on the server; `None` when none came.
     pub async fn claim(&self, runner_token: &str, wait_seconds: u64) -> Result<Option<Claim>, ApiError> {
-        let body = serde_json::json!({ "wait_seconds": wait_seconds });
+        let body = ClaimRequest { wait_seconds };
         let response = self
             .send("a claim", Duration::from_secs(30), || {
                 self.http.post(self.url("runners/jobs")).bearer_auth(runner_token).json(&body)
@@ -162,7 +126,7 @@ impl Api {
     /// Says what the runner prepares before it takes jobs (`None`: ready);
     /// shown on the server's home page.
     pub async fn status(&self, runner_token: &str, preparing: Option<&str>) -> Result<(), ApiError> {
-        let body = serde_json::json!({ "preparing": preparing });
+        let body = StatusReport { preparing: preparing.map(str::to_string) };
         self.send("a status report", Duration::from_secs(30), || {
             self.http.post(self.url("runners/status")).bearer_auth(runner_token).json(&body)
         })
@@ -196,21 +160,21 @@ impl Api {
     }
 
     /// Uploads the results (runs, metrics, scenes, provenance).
-    pub async fn put_results(&self, job: &Claim, upload: &serde_json::Value) -> Result<(), ApiError> {
+    pub async fn put_results(&self, job: &Claim, upload: &Upload) -> Result<(), ApiError> {
         self.send("the results", JOB_PATIENCE, || self.job_request(job, reqwest::Method::PUT, "results").json(upload))
             .await
             .map(drop)
     }
 
     /// Ends the job; returns the private results URL of a benchmark's result set.
-    pub async fn finish(&self, job: &Claim, outcome: &serde_json::Value) -> Result<Option<String>, ApiError> {
+    pub async fn finish(&self, job: &Claim, outcome: &Outcome) -> Result<Option<String>, ApiError> {
         let response = self
             .send("the job's end", JOB_PATIENCE, || {
                 self.job_request(job, reqwest::Method::POST, "finish").json(outcome)
             })
             .await?;
-        let body: serde_json::Value = response.json().await.map_err(|e| unreadable("the job's end", e))?;
-        Ok(body["results_url"].as_str().map(str::to_string))
+        let body: Finished = response.json().await.map_err(|e| unreadable("the job's end", e))?;
+        Ok(body.results_url)
     }
 
     fn job_request(&self, job: &Claim, method: reqwest::Method, what: &str) -> reqwest::RequestBuilder {

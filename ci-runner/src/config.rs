@@ -84,7 +84,7 @@ impl RunnerConfig {
         let mut found = Vec::new();
         for entry in std::fs::read_dir(self.scene_root.join("experimental"))? {
             let entry = entry?;
-            if entry.path().join(fbksd_manager::scenes::META_FILE).is_file() {
+            if entry.path().join(fbksd_exchange::scenes::META_FILE).is_file() {
                 found.push(format!("experimental/{}", entry.file_name().to_string_lossy()));
             }
         }

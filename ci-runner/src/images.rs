@@ -4,7 +4,7 @@
 //! its image id (a content digest) and records that in every result.
 
 use bollard::Docker;
-use fbksd_manager::technique::Environment;
+use fbksd_exchange::technique::Environment;
 use serde::Deserialize;
 use std::path::Path;
 

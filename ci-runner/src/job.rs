@@ -14,17 +14,19 @@
 //! Every failure is a [`Failure`] with a typed [`FailureReason`] and a message the
 //! author can act on.
 
-use crate::api::{Api, ApiError, Claim};
+use crate::api::{Api, ApiError};
 use crate::images::Images;
 use crate::launcher::{DockerLauncher, RoleContainer};
 use crate::machine::Machine;
 use crate::pool::PoolScene;
 use crate::sandbox::{ContainerEnd, ContainerSpec, Mount, Sandbox};
 use crate::RunnerConfig;
+use fbksd_exchange::results::{path_safe_name, ResultsDir};
+use fbksd_exchange::runner_api::Claim;
+use fbksd_exchange::runner_api::{ImageRef, JobKind, Provenance, SandboxLimits, SceneProvenance, Upload};
+use fbksd_exchange::technique::{Environment, TechniqueInfo};
 use fbksd_iqa::Metric;
 use fbksd_manager::evaluation::{compute, AnyMetric};
-use fbksd_manager::results::{path_safe_name, ResultsDir};
-use fbksd_manager::technique::{Environment, TechniqueInfo};
 use fbksd_manager::{Benchmark, FailureReason, Limits, Progress, RunStatus, SceneSpec, TechniqueSpec};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -150,7 +152,7 @@ pub async fn run(
         image.id
     ));
     let install = build(ctx, claim, &info, &src, dir, log).await?;
-    if claim.job.kind != "benchmark" {
+    if claim.job.kind != JobKind::Benchmark {
         return Ok(format!("built in {:.1} s", started.elapsed().as_secs_f64()));
     }
     if cancelled.load(Ordering::SeqCst) {
@@ -458,7 +460,7 @@ async fn benchmark(
 }
 
 /// The upload, the files to send with it, and the success message.
-type Collected = (serde_json::Value, Vec<(String, PathBuf)>, String);
+type Collected = (Upload, Vec<(String, PathBuf)>, String);
 
 /// Computes the metrics and gathers what is uploaded.
 async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results: &Path) -> Result<Collected, Failure> {
@@ -486,34 +488,45 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
         format!("{} runs on {} scenes, {failed} of them failed (they rank last)", index.runs.len(), ctx.scenes.len())
     };
     let environment_image = ctx.images.for_environment(info.environment);
-    let upload = serde_json::json!({
-        "runs": index.runs,
-        "metrics": metrics.iter().map(AnyMetric::info).collect::<Vec<_>>(),
-        "scenes": ctx.scenes.iter().map(|s| serde_json::json!({
-            "name": path_safe_name(&s.meta.name),
-            "tags": s.meta.tags,
-            "scene_hash": s.scene_hash,
-            "reference_hash": s.reference_hash,
-        })).collect::<Vec<_>>(),
-        "provenance": {
-            "image_digest": environment_image.id,
-            "images": {
-                info.environment.as_str(): { "tag": environment_image.tag, "id": environment_image.id },
-                "renderer": { "tag": ctx.images.renderer.tag, "id": ctx.images.renderer.id },
-            },
-            "commit": claim.commit,
-            "version": info.versions[0].name,
-            "runner": ctx.runner.1,
-            "runner_id": ctx.runner.0,
-            "machine": ctx.machine,
-            "limits": {
-                "run_timeout_s": ctx.config.run_timeout.as_secs_f64(),
-                "memory_mib": ctx.config.memory_mib,
-                "pids": ctx.config.pids,
-            },
-            "fbksd_ci": env!("CARGO_PKG_VERSION"),
+    let upload = Upload {
+        runs: index.runs,
+        metrics: metrics.iter().map(AnyMetric::info).collect(),
+        scenes: ctx
+            .scenes
+            .iter()
+            .map(|s| SceneProvenance {
+                name: path_safe_name(&s.meta.name),
+                tags: s.meta.tags.clone(),
+                scene_hash: s.scene_hash.clone(),
+                reference_hash: s.reference_hash.clone(),
+            })
+            .collect(),
+        provenance: Provenance {
+            image_digest: Some(environment_image.id.clone()),
+            images: [
+                (
+                    info.environment.as_str().to_string(),
+                    ImageRef { tag: environment_image.tag.clone(), id: environment_image.id.clone() },
+                ),
+                (
+                    "renderer".to_string(),
+                    ImageRef { tag: ctx.images.renderer.tag.clone(), id: ctx.images.renderer.id.clone() },
+                ),
+            ]
+            .into(),
+            commit: Some(claim.commit.clone()),
+            version: Some(info.versions[0].name.clone()),
+            runner: Some(ctx.runner.1.clone()),
+            runner_id: Some(ctx.runner.0.clone()),
+            machine: serde_json::to_value(&ctx.machine).unwrap_or_default(),
+            limits: Some(SandboxLimits {
+                run_timeout_s: ctx.config.run_timeout.as_secs_f64(),
+                memory_mib: ctx.config.memory_mib,
+                pids: ctx.config.pids,
+            }),
+            fbksd_ci: Some(env!("CARGO_PKG_VERSION").to_string()),
         },
-    });
+    };
     Ok((upload, files, message))
 }
 

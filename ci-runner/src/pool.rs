@@ -7,7 +7,7 @@
 //! references; the references stay on the runner's machine, where the
 //! metrics are computed, and no container ever sees them.
 
-use fbksd_manager::scenes::SceneMeta;
+use fbksd_exchange::scenes::SceneMeta;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
@@ -21,7 +21,7 @@ pub struct PoolScene {
     pub rel: String,
     /// Its metadata (with the directory on this machine).
     pub meta: SceneMeta,
-    /// Its digest ([`fbksd_manager::scenes::scene_digest`]: the files beside
+    /// Its digest ([`fbksd_exchange::scenes::scene_digest`]: the files beside
     /// the scene file), the same that the renderers' reference caches use.
     pub scene_hash: String,
     /// SHA-256 of its reference image.
@@ -54,8 +54,8 @@ pub async fn make_missing_references(
     }
     for (i, (rel, meta)) in missing.iter().enumerate() {
         let budget = match &meta.reference {
-            fbksd_manager::scenes::ReferenceMethod::Render { spp } => format!("{spp} spp"),
-            fbksd_manager::scenes::ReferenceMethod::ClosedForm { formula } => format!("closed form {formula}"),
+            fbksd_exchange::scenes::ReferenceMethod::Render { spp } => format!("{spp} spp"),
+            fbksd_exchange::scenes::ReferenceMethod::ClosedForm { formula } => format!("closed form {formula}"),
         };
         let status = format!(
             "making reference {} of {}: {rel} ({}×{}, {budget})",
@@ -65,7 +65,7 @@ pub async fn make_missing_references(
             meta.height
         );
         tracing::info!("{status}");
-        let program = fbksd_manager::scenes::renderer_program(&meta.renderer)
+        let program = fbksd_exchange::scenes::renderer_program(&meta.renderer)
             .map_err(|e| anyhow::anyhow!("scene pool: the reference of {rel}: {e}"))?;
         let mut child = tokio::process::Command::new(&program)
             .arg("reference")
@@ -104,7 +104,7 @@ pub fn load(root: &Path, dirs: &[String]) -> anyhow::Result<Vec<PoolScene>> {
                 dir.display()
             )
         })?;
-        let scene_hash = fbksd_manager::scenes::scene_digest(&meta.scene_file())?;
+        let scene_hash = fbksd_exchange::scenes::scene_digest(&meta.scene_file())?;
         scenes.push(PoolScene {
             rel: rel.clone(),
             scene_hash,

@@ -14,13 +14,15 @@
 //!   at start, whatever a killed predecessor left (containers with this
 //!   runner's label, job directories, rendezvous directories).
 
-use crate::api::{Api, Claim, RunnerCredentials};
+use crate::api::Api;
 use crate::images::Images;
 use crate::job::{self, Failure, JobContext, JobLog};
 use crate::machine::Machine;
 use crate::sandbox::Sandbox;
 use crate::RunnerConfig;
 use bollard::Docker;
+use fbksd_exchange::runner_api::Outcome;
+use fbksd_exchange::runner_api::{Claim, RunnerCredentials};
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -198,11 +200,11 @@ impl Runner {
         let body = match &outcome {
             Ok(message) => {
                 log.line(format!("[fbksd-ci] succeeded: {message}"));
-                serde_json::json!({ "state": "succeeded", "message": message })
+                Outcome::succeeded(message.clone())
             }
             Err(Failure { reason, message }) => {
                 log.line(format!("[fbksd-ci] failed ({}): {message}", reason.as_str()));
-                serde_json::json!({ "state": "failed", "reason": reason, "message": message })
+                Outcome::failed(*reason, message.clone())
             }
         };
         if let Err(e) = log.flush(&ctx.api, claim).await {

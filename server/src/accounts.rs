@@ -3,11 +3,10 @@
 //! sessions with their CSRF token. Only SHA-256 digests of tokens are
 //! stored, so a leaked database opens no session.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::now_ms;
 use argon2::password_hash::{rand_core::OsRng, PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
 use argon2::Argon2;
-use axum::http::StatusCode;
 use rand::RngCore;
 use sha2::{Digest, Sha256};
 use sqlx::{AnyPool, Row};
@@ -18,10 +17,10 @@ pub struct Email(String);
 
 impl Email {
     /// Parses an address: one `@`, a dot in the domain, no spaces, at most 254 bytes.
-    pub fn parse(text: &str) -> Result<Email, ApiError> {
+    pub fn parse(text: &str) -> Result<Email, ServiceError> {
         let email = text.trim().to_lowercase();
         let bad =
-            |why: &str| ApiError::bad_request("invalid_email", format!("{email:?} is not an e-mail address: {why}"));
+            |why: &str| ServiceError::invalid("invalid_email", format!("{email:?} is not an e-mail address: {why}"));
         if email.len() > 254 {
             return Err(bad("longer than 254 characters"));
         }
@@ -50,20 +49,20 @@ pub struct Password(String);
 
 impl Password {
     /// Checks the length rules.
-    pub fn parse(text: &str) -> Result<Password, ApiError> {
+    pub fn parse(text: &str) -> Result<Password, ServiceError> {
         let n = text.chars().count();
         if n < 10 {
-            return Err(ApiError::bad_request("weak_password", "the password needs at least 10 characters"));
+            return Err(ServiceError::invalid("weak_password", "the password needs at least 10 characters"));
         }
         if n > 1024 {
-            return Err(ApiError::bad_request("invalid_password", "the password is longer than 1024 characters"));
+            return Err(ServiceError::invalid("invalid_password", "the password is longer than 1024 characters"));
         }
         Ok(Password(text.to_string()))
     }
 
-    fn hash(&self) -> Result<String, ApiError> {
+    fn hash(&self) -> Result<String, ServiceError> {
         let salt = SaltString::generate(&mut OsRng);
-        Argon2::default().hash_password(self.0.as_bytes(), &salt).map(|h| h.to_string()).map_err(ApiError::internal)
+        Argon2::default().hash_password(self.0.as_bytes(), &salt).map(|h| h.to_string()).map_err(ServiceError::internal)
     }
 }
 
@@ -110,6 +109,19 @@ fn user_of(row: &sqlx::any::AnyRow) -> Result<User, sqlx::Error> {
     })
 }
 
+/// Registers an unverified account and mails its verification link.
+pub async fn register(state: &crate::AppState, email: &Email, password: &Password) -> Result<User, ServiceError> {
+    let user = create_user(&state.pool, email, password, false, false).await?;
+    let token = issue_email_token(&state.pool, &user.id, "verify").await?;
+    let link = format!("{}/accounts/verify?token={token}", state.public_url);
+    let body = format!(
+        "Welcome to FBKSD.\n\nConfirm your e-mail address to use your account:\n\n{link}\n\n\
+         The link works once, for 48 hours. If you did not register, ignore this message.\n"
+    );
+    state.mailer.send(&state.config.mail_from, email.as_str(), "Confirm your FBKSD account", body).await?;
+    Ok(user)
+}
+
 /// Creates an account; `verified` accounts skip the e-mail step (the
 /// bootstrap administrator). A taken address is a 409.
 pub async fn create_user(
@@ -118,7 +130,7 @@ pub async fn create_user(
     password: &Password,
     verified: bool,
     is_admin: bool,
-) -> Result<User, ApiError> {
+) -> Result<User, ServiceError> {
     let id = uuid::Uuid::new_v4().to_string();
     let hash = password.hash()?;
     let inserted = sqlx::query(
@@ -134,8 +146,7 @@ pub async fn create_user(
     .await;
     match inserted {
         Ok(_) => Ok(User { id, email: email.as_str().to_string(), verified, is_admin }),
-        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => Err(ApiError::new(
-            StatusCode::CONFLICT,
+        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => Err(ServiceError::conflict(
             "email_taken",
             format!("an account with {} exists: log in, or reset its password", email.as_str()),
         )),
@@ -167,9 +178,9 @@ pub async fn issue_email_token(pool: &AnyPool, user_id: &str, purpose: &str) -> 
 
 /// Uses a one-time token: returns its user, or an error saying it is
 /// unknown, used or expired.
-pub async fn redeem_email_token(pool: &AnyPool, token: &str, purpose: &str) -> Result<String, ApiError> {
+pub async fn redeem_email_token(pool: &AnyPool, token: &str, purpose: &str) -> Result<String, ServiceError> {
     let invalid =
-        || ApiError::bad_request("invalid_token", "this link is unknown, already used or expired: ask for a new one");
+        || ServiceError::invalid("invalid_token", "this link is unknown, already used or expired: ask for a new one");
     let mut tx = pool.begin().await?;
     let row = sqlx::query("SELECT user_id, expires_at, used FROM email_tokens WHERE token_hash = $1 AND purpose = $2")
         .bind(digest(token))
@@ -194,8 +205,8 @@ pub async fn mark_verified(pool: &AnyPool, user_id: &str) -> Result<(), sqlx::Er
 
 /// The user with these credentials; one message for an unknown address and
 /// a wrong password, so it does not tell which addresses exist.
-pub async fn authenticate(pool: &AnyPool, email: &str, password: &str) -> Result<User, ApiError> {
-    let wrong = || ApiError::unauthorized("wrong e-mail address or password");
+pub async fn authenticate(pool: &AnyPool, email: &str, password: &str) -> Result<User, ServiceError> {
+    let wrong = || ServiceError::unauthenticated("wrong e-mail address or password");
     let email = Email::parse(email).map_err(|_| wrong())?;
     let row = sqlx::query("SELECT id, email, password_hash, verified, is_admin FROM users WHERE email = $1")
         .bind(email.as_str())
@@ -208,7 +219,7 @@ pub async fn authenticate(pool: &AnyPool, email: &str, password: &str) -> Result
     }
     let user = user_of(&row)?;
     if !user.verified {
-        return Err(ApiError::forbidden(
+        return Err(ServiceError::forbidden(
             "email_not_verified",
             "verify your e-mail address first: follow the link we sent you",
         ));
@@ -261,7 +272,7 @@ pub async fn close_session(pool: &AnyPool, token: &str) -> Result<(), sqlx::Erro
 }
 
 /// Sets a new password and ends every session of the user.
-pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) -> Result<(), ApiError> {
+pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) -> Result<(), ServiceError> {
     let hash = password.hash()?;
     let mut tx = pool.begin().await?;
     sqlx::query("UPDATE users SET password_hash = $1 WHERE id = $2")
@@ -275,12 +286,12 @@ pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) ->
 }
 
 /// Checks a user's current password (for changes that need it).
-pub async fn check_password(pool: &AnyPool, user_id: &str, password: &str) -> Result<(), ApiError> {
+pub async fn check_password(pool: &AnyPool, user_id: &str, password: &str) -> Result<(), ServiceError> {
     let row = sqlx::query("SELECT password_hash FROM users WHERE id = $1").bind(user_id).fetch_one(pool).await?;
     if password_matches(password, &row.try_get::<String, _>("password_hash")?) {
         Ok(())
     } else {
-        Err(ApiError::forbidden("wrong_password", "the current password is wrong"))
+        Err(ServiceError::forbidden("wrong_password", "the current password is wrong"))
     }
 }
 
@@ -325,10 +336,10 @@ pub struct AccessToken {
 
 /// Creates a personal access token named `name`; returns its id and the
 /// token, which is shown this once.
-pub async fn create_access_token(pool: &AnyPool, user_id: &str, name: &str) -> Result<(String, String), ApiError> {
+pub async fn create_access_token(pool: &AnyPool, user_id: &str, name: &str) -> Result<(String, String), ServiceError> {
     let name = name.trim();
     if name.is_empty() || name.chars().count() > 100 {
-        return Err(ApiError::bad_request("invalid_name", "a token needs a name of 1 to 100 characters"));
+        return Err(ServiceError::invalid("invalid_name", "a token needs a name of 1 to 100 characters"));
     }
     let (id, token) = (uuid::Uuid::new_v4().to_string(), format!("{ACCESS_TOKEN_PREFIX}{}", random_token()));
     sqlx::query("INSERT INTO access_tokens (id, user_id, name, token_hash, created_at) VALUES ($1, $2, $3, $4, $5)")

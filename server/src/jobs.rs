@@ -10,43 +10,17 @@
 //! row with `FOR UPDATE SKIP LOCKED`; on SQLite writers are serialised and
 //! the update re-checks the state.
 
-use crate::error::ApiError;
+use crate::accounts::User;
+use crate::error::ServiceError;
 use crate::now_ms;
-use axum::http::StatusCode;
+use crate::projects::Project;
 use sqlx::{AnyPool, Row};
 
-/// What a job does.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum JobKind {
-    /// Sanity checks and a sandboxed build (every push).
-    Build,
-    /// Build, then benchmark on the scene pool (`FBKSD_RUN`).
-    Benchmark,
-    /// Publish a result (`FBKSD_PUBLISH`): done by the server at once.
-    Publish,
-}
-
-impl JobKind {
-    /// The stored name.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            JobKind::Build => "build",
-            JobKind::Benchmark => "benchmark",
-            JobKind::Publish => "publish",
-        }
-    }
-    fn parse(text: &str) -> JobKind {
-        match text {
-            "benchmark" => JobKind::Benchmark,
-            "publish" => JobKind::Publish,
-            _ => JobKind::Build,
-        }
-    }
-}
+/// What a job does and where it is (shared with the runner).
+pub use fbksd_exchange::runner_api::{JobKind, JobState};
 
 /// Why a job failed (shared with the runner, which decides it).
-pub use fbksd_manager::FailureReason;
+pub use fbksd_exchange::FailureReason;
 
 /// A job as pages and the API show it.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -63,8 +37,8 @@ pub struct Job {
     pub user_id: String,
     /// Build, benchmark or publish.
     pub kind: JobKind,
-    /// queued, running, succeeded, failed or cancelled.
-    pub state: String,
+    /// Where it is in its life.
+    pub state: JobState,
     /// Why it failed.
     pub failure_reason: Option<String>,
     /// What happened, for the user.
@@ -102,8 +76,8 @@ fn job_of(row: &sqlx::any::AnyRow) -> Result<Job, sqlx::Error> {
         project_id: row.try_get("project_id")?,
         project: row.try_get("project_name")?,
         user_id: row.try_get("user_id")?,
-        kind: JobKind::parse(&row.try_get::<String, _>("kind")?),
-        state: row.try_get("state")?,
+        kind: kind_of(row)?,
+        state: state_of(row)?,
         failure_reason: row.try_get("failure_reason")?,
         message: row.try_get("message")?,
         attempts: row.try_get("attempts")?,
@@ -116,6 +90,16 @@ fn job_of(row: &sqlx::any::AnyRow) -> Result<Job, sqlx::Error> {
         finished_at: row.try_get("finished_at")?,
         result_id: row.try_get("result_id")?,
     })
+}
+
+fn kind_of(row: &sqlx::any::AnyRow) -> Result<JobKind, sqlx::Error> {
+    let text: String = row.try_get("kind")?;
+    JobKind::parse(&text).ok_or_else(|| sqlx::Error::Decode(format!("unknown job kind {text:?}").into()))
+}
+
+fn state_of(row: &sqlx::any::AnyRow) -> Result<JobState, sqlx::Error> {
+    let text: String = row.try_get("state")?;
+    JobState::parse(&text).ok_or_else(|| sqlx::Error::Decode(format!("unknown job state {text:?}").into()))
 }
 
 /// The job with id `id`, if any.
@@ -195,8 +179,8 @@ pub async fn claim(
     Ok(Some(Claimed { job, token }))
 }
 
-/// The running job a job token belongs to: (job id, attempt).
-pub async fn token_job(pool: &AnyPool, token: &str) -> Result<Option<(String, String, i64)>, sqlx::Error> {
+/// The job a job token belongs to: (job id, its state, attempt).
+pub async fn token_job(pool: &AnyPool, token: &str) -> Result<Option<(String, JobState, i64)>, sqlx::Error> {
     if !token.starts_with(JOB_TOKEN_PREFIX) {
         return Ok(None);
     }
@@ -204,7 +188,7 @@ pub async fn token_job(pool: &AnyPool, token: &str) -> Result<Option<(String, St
         .bind(crate::accounts::digest(token))
         .fetch_optional(pool)
         .await?;
-    row.map(|r| Ok((r.try_get("id")?, r.try_get("state")?, r.try_get("attempts")?))).transpose()
+    row.map(|r| Ok((r.try_get("id")?, state_of(&r)?, r.try_get("attempts")?))).transpose()
 }
 
 /// Extends a running job's lease.
@@ -306,7 +290,7 @@ pub async fn expire_leases(pool: &AnyPool) -> Result<usize, sqlx::Error> {
 
 /// Cancels a queued or running job; a job cancelled before it started does
 /// not count against the quota.
-pub async fn cancel(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ApiError> {
+pub async fn cancel(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ServiceError> {
     let done = sqlx::query(
         "UPDATE jobs SET state = 'cancelled', token_hash = NULL, lease_expires_at = NULL, finished_at = $1, \
          message = $2, counts_for_quota = CASE WHEN started_at IS NULL THEN 0 ELSE counts_for_quota END \
@@ -318,14 +302,14 @@ pub async fn cancel(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ApiErr
     .execute(pool)
     .await?;
     if done.rows_affected() == 0 {
-        return Err(ApiError::new(StatusCode::CONFLICT, "job_finished", "the job has already ended"));
+        return Err(ServiceError::conflict("job_finished", "the job has already ended"));
     }
     append_log(pool, job_id, 0, &format!("[fbksd] cancelled by {by}\n"), i64::MAX).await?;
     Ok(())
 }
 
 /// Queues a job again (administration): a new attempt budget, a new token.
-pub async fn requeue(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ApiError> {
+pub async fn requeue(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ServiceError> {
     let done = sqlx::query(
         "UPDATE jobs SET state = 'queued', token_hash = NULL, lease_expires_at = NULL, finished_at = NULL, \
          failure_reason = NULL, message = '', attempts = 0, staged_results = NULL, upload_bytes = 0 \
@@ -335,14 +319,194 @@ pub async fn requeue(pool: &AnyPool, job_id: &str, by: &str) -> Result<(), ApiEr
     .execute(pool)
     .await?;
     if done.rows_affected() == 0 {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
+        return Err(ServiceError::conflict(
             "not_requeueable",
             "this job cannot be queued again (it published or produced a result set)",
         ));
     }
     append_log(pool, job_id, 0, &format!("[fbksd] queued again by {by}\n"), i64::MAX).await?;
     Ok(())
+}
+
+/// A job to create, in the state its pipeline decided.
+pub struct NewJob<'a> {
+    /// Random id.
+    pub id: &'a str,
+    /// Its pipeline.
+    pub pipeline_id: &'a str,
+    /// Its project.
+    pub project_id: &'a str,
+    /// Who started it.
+    pub user_id: &'a str,
+    /// What it does.
+    pub kind: JobKind,
+    /// Queued, or already ended (failed checks, over quota, a publish).
+    pub state: JobState,
+    /// Why it failed, if it did.
+    pub failure_reason: Option<FailureReason>,
+    /// What happened, for the user.
+    pub message: &'a str,
+    /// Attempts allowed.
+    pub max_attempts: i64,
+    /// The season it runs for.
+    pub season: i64,
+    /// Publish the result set when it succeeds (season re-runs).
+    pub publish_on_success: bool,
+    /// Whether it uses up one of the day's runs.
+    pub counts_for_quota: bool,
+    /// When it ended, if it already has.
+    pub finished_at: Option<i64>,
+}
+
+/// Creates a job in its pipeline's transaction.
+pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewJob<'_>) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO jobs (id, pipeline_id, project_id, user_id, kind, state, failure_reason, message, attempts, \
+         max_attempts, season, publish_on_success, counts_for_quota, log_bytes, upload_bytes, created_at, finished_at) \
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14)",
+    )
+    .bind(new.id)
+    .bind(new.pipeline_id)
+    .bind(new.project_id)
+    .bind(new.user_id)
+    .bind(new.kind.as_str())
+    .bind(new.state.as_str())
+    .bind(new.failure_reason.map(FailureReason::as_str))
+    .bind(new.message)
+    .bind(new.max_attempts)
+    .bind(new.season)
+    .bind(new.publish_on_success as i64)
+    .bind(new.counts_for_quota as i64)
+    .bind(now_ms())
+    .bind(new.finished_at)
+    .execute(&mut **tx)
+    .await?;
+    Ok(())
+}
+
+/// Puts a running job back in the queue (an infrastructure error: not the
+/// author's fault), dropping its token and anything it staged.
+pub async fn queue_again(pool: &AnyPool, job_id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "UPDATE jobs SET state = 'queued', token_hash = NULL, lease_expires_at = NULL, staged_results = NULL, \
+         upload_bytes = 0 WHERE id = $1 AND state = 'running'",
+    )
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    Ok(())
+}
+
+/// Ends a running job in `state` (and logs it); `counts_for_quota` false
+/// gives the author's run back.
+pub async fn end(
+    pool: &AnyPool,
+    job_id: &str,
+    state: JobState,
+    reason: Option<FailureReason>,
+    message: &str,
+    counts_for_quota: bool,
+) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "UPDATE jobs SET state = $1, failure_reason = $2, message = $3, finished_at = $4, token_hash = NULL, \
+         lease_expires_at = NULL, counts_for_quota = CASE WHEN $5 = 1 THEN counts_for_quota ELSE 0 END \
+         WHERE id = $6 AND state = 'running'",
+    )
+    .bind(state.as_str())
+    .bind(reason.map(FailureReason::as_str))
+    .bind(message)
+    .bind(now_ms())
+    .bind(counts_for_quota as i64)
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    let line = match reason {
+        Some(r) => format!("[fbksd] failed ({}): {message}\n", r.as_str()),
+        None => format!("[fbksd] {state}\n"),
+    };
+    append_log(pool, job_id, 0, &line, i64::MAX).await?;
+    Ok(())
+}
+
+/// Counts `bytes` against a job's upload budget of `max` bytes; false (and
+/// nothing counted) when they would pass it.
+pub async fn charge_upload(pool: &AnyPool, job_id: &str, bytes: usize, max: u64) -> Result<bool, sqlx::Error> {
+    let done =
+        sqlx::query("UPDATE jobs SET upload_bytes = upload_bytes + $1 WHERE id = $2 AND upload_bytes + $1 <= $3")
+            .bind(bytes as i64)
+            .bind(job_id)
+            .bind(max as i64)
+            .execute(pool)
+            .await?;
+    Ok(done.rows_affected() > 0)
+}
+
+/// Keeps a job's checked results upload until the job reports success.
+pub async fn stage_results(pool: &AnyPool, job_id: &str, upload: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE jobs SET staged_results = $1 WHERE id = $2").bind(upload).bind(job_id).execute(pool).await?;
+    Ok(())
+}
+
+/// A job's staged results upload, and whether it publishes on success.
+pub async fn staged_results(pool: &AnyPool, job_id: &str) -> Result<(Option<String>, bool), sqlx::Error> {
+    let row = sqlx::query("SELECT staged_results, publish_on_success FROM jobs WHERE id = $1")
+        .bind(job_id)
+        .fetch_one(pool)
+        .await?;
+    Ok((row.try_get("staged_results")?, row.try_get::<i64, _>("publish_on_success")? != 0))
+}
+
+/// Ends a running benchmark with its result set, in the transaction that
+/// stores the set; false when the job is no longer running.
+pub async fn succeed_with_results(
+    tx: &mut sqlx::Transaction<'_, sqlx::Any>,
+    job_id: &str,
+    result_id: &str,
+) -> Result<bool, sqlx::Error> {
+    let ended = sqlx::query(
+        "UPDATE jobs SET state = 'succeeded', finished_at = $1, token_hash = NULL, lease_expires_at = NULL, \
+         staged_results = NULL, message = $2 WHERE id = $3 AND state = 'running'",
+    )
+    .bind(now_ms())
+    .bind(format!("results: /results/{result_id}"))
+    .bind(job_id)
+    .execute(&mut **tx)
+    .await?;
+    Ok(ended.rows_affected() > 0)
+}
+
+/// Ends the leases of a removed runner's running jobs, so the sweeper
+/// queues them again at once.
+pub async fn drop_leases_of(pool: &AnyPool, runner_id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE jobs SET lease_expires_at = 0 WHERE runner_id = $1 AND state = 'running'")
+        .bind(runner_id)
+        .execute(pool)
+        .await?;
+    Ok(())
+}
+
+/// The job `id` and its project if `user` can read the project; not found
+/// otherwise (and for an invalid id), so private jobs stay invisible.
+pub async fn readable(pool: &AnyPool, id: &str, user: Option<&User>) -> Result<(Job, Project), ServiceError> {
+    let not_found = || ServiceError::not_found(format!("no job {id:?} that you can see"));
+    let job = get(pool, id).await?.ok_or_else(not_found)?;
+    let project = crate::projects::by_id(pool, &job.project_id).await?.ok_or_else(not_found)?;
+    if !project.readable_by(user) {
+        return Err(not_found());
+    }
+    Ok((job, project))
+}
+
+/// Cancels job `id` if `user` owns its project or is an administrator.
+pub async fn cancel_as(pool: &AnyPool, id: &str, user: &User) -> Result<(), ServiceError> {
+    let (job, project) = readable(pool, id, Some(user)).await?;
+    if !(project.writable_by(user) || user.is_admin) {
+        return Err(ServiceError::forbidden(
+            "not_owner",
+            "only the project's owner or an administrator can cancel its jobs",
+        ));
+    }
+    cancel(pool, &job.id, &user.email).await
 }
 
 /// Queued jobs of a user.

@@ -12,8 +12,8 @@
 //! (its run failed) ranks last there instead of being skipped.
 
 use crate::results::{ResultSet, StoredRun};
-use fbksd_iqa::MetricInfo;
-use fbksd_manager::results::IndexEntry;
+use fbksd_exchange::results::IndexEntry;
+use fbksd_exchange::MetricInfo;
 use serde::Serialize;
 use sqlx::AnyPool;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -269,7 +269,7 @@ fn assemble(
                 technique: set.id.clone(),
                 scene: r.scene.clone(),
                 spp: r.spp as u64,
-                status: fbksd_manager::RunStatus::Ok,
+                status: fbksd_exchange::RunStatus::Ok,
                 message: String::new(),
                 log: String::new(),
                 image: None,
@@ -280,7 +280,7 @@ fn assemble(
             })
         })
         .collect();
-    let standings = fbksd_manager::evaluation::rank(&index, lower_is_better)
+    let standings = fbksd_exchange::ranking::rank(&index, lower_is_better)
         .into_iter()
         .filter_map(|s| {
             let set = technique_of.get(s.technique.as_str())?;

@@ -20,6 +20,7 @@
 #![deny(missing_docs)]
 
 pub mod accounts;
+pub mod admin;
 mod app;
 pub mod config;
 pub mod db;

@@ -17,13 +17,11 @@
 //! author.
 
 use crate::accounts::User;
-use crate::error::ApiError;
-use crate::jobs::{FailureReason, JobKind};
+use crate::error::ServiceError;
+use crate::jobs::{FailureReason, JobKind, JobState};
 use crate::projects::Project;
 use crate::{now_ms, AppState};
-use axum::http::StatusCode;
-use fbksd_manager::technique::TechniqueInfo;
-use sqlx::Row;
+use fbksd_exchange::technique::TechniqueInfo;
 
 /// What a pipeline's variables ask for.
 #[derive(Debug, Clone, PartialEq)]
@@ -88,7 +86,7 @@ impl Request {
     /// Parses variables given as `(name, value)`; unknown names and bad
     /// values are refused with the allowed ones named, and so is more than
     /// one request.
-    pub fn parse<'a>(variables: impl IntoIterator<Item = (&'a str, &'a str)>) -> Result<Request, ApiError> {
+    pub fn parse<'a>(variables: impl IntoIterator<Item = (&'a str, &'a str)>) -> Result<Request, ServiceError> {
         let mut request = Request::Build;
         for (name, value) in variables {
             let next = match name {
@@ -98,7 +96,7 @@ impl Request {
                     match uuid::Uuid::parse_str(value).ok().filter(|_| [32, 36].contains(&value.len())) {
                         Some(key) => Request::Publish(key),
                         None => {
-                            return Err(ApiError::bad_request(
+                            return Err(ServiceError::invalid(
                                 "invalid_variable",
                                 format!("{PUBLISH_NEEDS}, not {value:?}"),
                             ))
@@ -106,14 +104,14 @@ impl Request {
                     }
                 }
                 other => {
-                    return Err(ApiError::bad_request(
+                    return Err(ServiceError::invalid(
                         "unknown_variable",
                         format!("unknown variable {other:?}: {KNOWN}"),
                     ))
                 }
             };
             if request != Request::Build {
-                return Err(ApiError::bad_request("conflicting_variables", ONE_REQUEST));
+                return Err(ServiceError::invalid("conflicting_variables", ONE_REQUEST));
             }
             request = next;
         }
@@ -121,7 +119,7 @@ impl Request {
     }
 
     /// Parses push options (`NAME` or `NAME=value`).
-    pub fn from_push_options(options: &[String]) -> Result<Request, ApiError> {
+    pub fn from_push_options(options: &[String]) -> Result<Request, ServiceError> {
         Request::parse(options.iter().map(|o| o.split_once('=').unwrap_or((o.as_str(), ""))))
     }
 
@@ -185,7 +183,7 @@ pub async fn start(
     git_ref: &str,
     request: Request,
     source: Source,
-) -> Result<Started, ApiError> {
+) -> Result<Started, ServiceError> {
     // Decide everything before writing, so a refusal writes nothing.
     let season = crate::results::current_season(&state.pool).await?;
     let (kind, mut failure, mut cancelled) = (
@@ -210,7 +208,7 @@ pub async fn start(
             let published = async {
                 let set = crate::results::owned(&state.pool, &key.to_string(), &user.id).await?;
                 if set.project.as_deref() != Some(project.name.as_str()) {
-                    return Err(ApiError::bad_request(
+                    return Err(ServiceError::invalid(
                         "wrong_project",
                         format!("result {key} belongs to another project"),
                     ));
@@ -234,20 +232,19 @@ pub async fn start(
         }
     }
 
-    let (job_state, reason, finished) = match (&failure, &cancelled, kind) {
-        (Some((reason, problem)), _, _) => {
+    let (job_state, finished) = match (&failure, &cancelled, kind) {
+        (Some((_, problem)), _, _) => {
             message = problem.clone();
-            ("failed", Some(reason.as_str()), Some(now_ms()))
+            (JobState::Failed, Some(now_ms()))
         }
         (None, Some(why), _) => {
             message = why.clone();
-            ("cancelled", None, Some(now_ms()))
+            (JobState::Cancelled, Some(now_ms()))
         }
-        (None, None, JobKind::Publish) => ("succeeded", None, Some(now_ms())),
-        (None, None, _) => ("queued", None, None),
+        (None, None, JobKind::Publish) => (JobState::Succeeded, Some(now_ms())),
+        (None, None, _) => (JobState::Queued, None),
     };
     let (pipeline_id, job_id) = (uuid::Uuid::new_v4().to_string(), uuid::Uuid::new_v4().to_string());
-    let now = now_ms();
     let mut tx = state.pool.begin().await?;
     sqlx::query(
         "INSERT INTO pipelines (id, project_id, user_id, commit_sha, git_ref, variables, source, created_at) \
@@ -260,41 +257,36 @@ pub async fn start(
     .bind(git_ref)
     .bind(request.variables().to_string())
     .bind(source.as_str())
-    .bind(now)
+    .bind(now_ms())
     .execute(&mut *tx)
     .await?;
-    sqlx::query(
-        "INSERT INTO jobs (id, pipeline_id, project_id, user_id, kind, state, failure_reason, message, attempts, \
-         max_attempts, season, publish_on_success, counts_for_quota, log_bytes, upload_bytes, created_at, finished_at) \
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14)",
-    )
-    .bind(&job_id)
-    .bind(&pipeline_id)
-    .bind(&project.id)
-    .bind(&user.id)
-    .bind(kind.as_str())
-    .bind(job_state)
-    .bind(reason)
-    .bind(&message)
-    .bind(state.config.max_attempts as i64)
-    .bind(season)
-    .bind((source == Source::Season) as i64)
-    // Only runs that were queued use up the day's runs.
-    .bind((kind == JobKind::Benchmark && job_state == "queued" && source != Source::Season) as i64)
-    .bind(now)
-    .bind(finished)
-    .execute(&mut *tx)
-    .await?;
+    let new_job = crate::jobs::NewJob {
+        id: &job_id,
+        pipeline_id: &pipeline_id,
+        project_id: &project.id,
+        user_id: &user.id,
+        kind,
+        state: job_state,
+        failure_reason: failure.as_ref().map(|(reason, _)| *reason),
+        message: &message,
+        max_attempts: state.config.max_attempts as i64,
+        season,
+        publish_on_success: source == Source::Season,
+        // Only runs that were queued use up the day's runs.
+        counts_for_quota: kind == JobKind::Benchmark && job_state == JobState::Queued && source != Source::Season,
+        finished_at: finished,
+    };
+    crate::jobs::insert(&mut tx, &new_job).await?;
     tx.commit().await?;
 
     let first_line = match job_state {
-        "queued" => format!("[fbksd] {} of {commit} queued ({})\n", kind.as_str(), source.as_str()),
+        JobState::Queued => format!("[fbksd] {} of {commit} queued ({})\n", kind.as_str(), source.as_str()),
         _ => format!("[fbksd] {job_state}: {message}\n"),
     };
     crate::jobs::append_log(&state.pool, &job_id, 0, &first_line, i64::MAX).await?;
     state.job_queued.notify_waiters();
-    let job = crate::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ApiError::internal("job vanished"))?;
-    if job_state == "failed" {
+    let job = crate::jobs::get(&state.pool, &job_id).await?.ok_or_else(|| ServiceError::internal("job vanished"))?;
+    if job_state == JobState::Failed {
         mail_failure(state, user, &job).await;
     }
     Ok(Started { pipeline_id, job })
@@ -305,23 +297,22 @@ pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> Strin
     let url = format!("{}/jobs/{}", state.public_url, job.id);
     let what = format!("{} of {branch} at {}", job.kind.as_str(), &job.commit_sha[..job.commit_sha.len().min(10)]);
     let first_line = job.message.lines().next().unwrap_or("");
-    match (job.state.as_str(), job.kind) {
-        ("queued", JobKind::Benchmark) => format!(
+    match (job.state, job.kind) {
+        (JobState::Queued, JobKind::Benchmark) => format!(
             "FBKSD: {what} queued: {url}\nFBKSD: when it ends, its log and a mail give your private results link"
         ),
-        ("queued", _) => format!("FBKSD: {what} queued: {url}"),
-        ("failed", _) => format!("FBKSD: {what} failed: {first_line}\nFBKSD: details: {url}"),
-        ("cancelled", _) => format!("FBKSD: {what}: {first_line}\nFBKSD: details: {url}"),
+        (JobState::Queued, _) => format!("FBKSD: {what} queued: {url}"),
+        (JobState::Failed, _) => format!("FBKSD: {what} failed: {first_line}\nFBKSD: details: {url}"),
+        (JobState::Cancelled, _) => format!("FBKSD: {what}: {first_line}\nFBKSD: details: {url}"),
         (_, _) => format!("FBKSD: {first_line}"),
     }
 }
 
 /// Refuses a run over the user's quotas.
-async fn check_quota(state: &AppState, user_id: &str) -> Result<(), ApiError> {
+async fn check_quota(state: &AppState, user_id: &str) -> Result<(), ServiceError> {
     let queued = crate::jobs::queued_count(&state.pool, user_id).await?;
     if queued >= state.config.max_queued_jobs_per_user as i64 {
-        return Err(ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
+        return Err(ServiceError::too_many(
             "quota_queued",
             format!(
                 "you have {queued} jobs queued (the limit is {}): wait for them to run",
@@ -331,8 +322,7 @@ async fn check_quota(state: &AppState, user_id: &str) -> Result<(), ApiError> {
     }
     let today = crate::jobs::runs_today(&state.pool, user_id).await?;
     if today >= state.config.max_runs_per_day as i64 {
-        return Err(ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
+        return Err(ServiceError::too_many(
             "quota_runs",
             format!(
                 "you have used your {} benchmark runs of the last 24 hours; runs that failed for infrastructure \
@@ -362,18 +352,8 @@ pub async fn mail_failure(state: &AppState, user: &User, job: &crate::jobs::Job)
     }
 }
 
-/// How a runner says a job ended.
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Outcome {
-    /// `succeeded` or `failed`.
-    pub state: String,
-    /// For failures.
-    pub reason: Option<FailureReason>,
-    /// What happened, for the user.
-    #[serde(default)]
-    pub message: String,
-}
+/// How a runner says a job ended (shared with the runner).
+pub use fbksd_exchange::runner_api::Outcome;
 
 /// Ends a running job as its runner reports; a successful benchmark stores
 /// its result set. Returns the result set's UUID, if one was stored.
@@ -382,11 +362,11 @@ pub async fn finish(
     job_id: &str,
     attempt: i64,
     outcome: Outcome,
-) -> Result<Option<String>, ApiError> {
-    let job = crate::jobs::get(&state.pool, job_id).await?.ok_or_else(|| ApiError::internal("job vanished"))?;
+) -> Result<Option<String>, ServiceError> {
+    let job = crate::jobs::get(&state.pool, job_id).await?.ok_or_else(|| ServiceError::internal("job vanished"))?;
     let owner = crate::accounts::user_by_id(&state.pool, &job.user_id).await?;
-    match (outcome.state.as_str(), outcome.reason) {
-        ("succeeded", _) if job.kind == JobKind::Benchmark => {
+    match (outcome.state, outcome.reason) {
+        (JobState::Succeeded, _) if job.kind == JobKind::Benchmark => {
             let result_id = store_results(state, &job).await?;
             let url = format!("{}/results/{result_id}", state.public_url);
             crate::jobs::append_log(&state.pool, job_id, attempt, &format!("[fbksd] private results: {url}\n"), i64::MAX)
@@ -404,92 +384,53 @@ pub async fn finish(
             }
             Ok(Some(result_id))
         }
-        ("succeeded", _) => {
-            end(state, job_id, "succeeded", None, &outcome.message, true).await?;
+        (JobState::Succeeded, _) => {
+            crate::jobs::end(&state.pool, job_id, JobState::Succeeded, None, &outcome.message, true).await?;
             Ok(None)
         }
-        ("failed", Some(FailureReason::InfrastructureError)) if job.attempts < job.max_attempts => {
+        (JobState::Failed, Some(FailureReason::InfrastructureError)) if job.attempts < job.max_attempts => {
             // Not the user's fault: another runner tries again.
-            sqlx::query(
-                "UPDATE jobs SET state = 'queued', token_hash = NULL, lease_expires_at = NULL, staged_results = NULL, \
-                 upload_bytes = 0 WHERE id = $1 AND state = 'running'",
-            )
-            .bind(job_id)
-            .execute(&state.pool)
-            .await?;
+            crate::jobs::queue_again(&state.pool, job_id).await?;
             let note = format!("[fbksd] infrastructure error: {}; the job is queued again\n", outcome.message);
             crate::jobs::append_log(&state.pool, job_id, attempt, &note, i64::MAX).await?;
             state.job_queued.notify_waiters();
             Ok(None)
         }
-        ("failed", Some(reason)) => {
+        (JobState::Failed, Some(reason)) => {
             let counts = reason != FailureReason::InfrastructureError;
-            end(state, job_id, "failed", Some(reason), &outcome.message, counts).await?;
+            crate::jobs::end(&state.pool, job_id, JobState::Failed, Some(reason), &outcome.message, counts).await?;
             if let (Some(owner), Some(job)) = (owner, crate::jobs::get(&state.pool, job_id).await?) {
                 mail_failure(state, &owner, &job).await;
             }
             Ok(None)
         }
-        ("failed", None) => Err(ApiError::bad_request(
+        (JobState::Failed, None) => Err(ServiceError::invalid(
             "missing_reason",
             "a failed job needs a reason: build_failed, timeout, out_of_memory, crashed, invalid_output or infrastructure_error",
         )),
-        (other, _) => Err(ApiError::bad_request("invalid_state", format!("state {other:?}: use succeeded or failed"))),
+        (other, _) => Err(ServiceError::invalid("invalid_state", format!("state {other}: use succeeded or failed"))),
     }
-}
-
-async fn end(
-    state: &AppState,
-    job_id: &str,
-    job_state: &str,
-    reason: Option<FailureReason>,
-    message: &str,
-    counts: bool,
-) -> Result<(), ApiError> {
-    sqlx::query(
-        "UPDATE jobs SET state = $1, failure_reason = $2, message = $3, finished_at = $4, token_hash = NULL, \
-         lease_expires_at = NULL, counts_for_quota = CASE WHEN $5 = 1 THEN counts_for_quota ELSE 0 END \
-         WHERE id = $6 AND state = 'running'",
-    )
-    .bind(job_state)
-    .bind(reason.map(|r| r.as_str()))
-    .bind(message)
-    .bind(now_ms())
-    .bind(counts as i64)
-    .bind(job_id)
-    .execute(&state.pool)
-    .await?;
-    let line = match reason {
-        Some(r) => format!("[fbksd] failed ({}): {message}\n", r.as_str()),
-        None => format!("[fbksd] {job_state}\n"),
-    };
-    crate::jobs::append_log(&state.pool, job_id, 0, &line, i64::MAX).await?;
-    Ok(())
 }
 
 /// Turns a benchmark job's staged upload into a result set, in one
 /// transaction with the job's end; then moves its files into place.
-async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<String, ApiError> {
-    let row = sqlx::query("SELECT staged_results, publish_on_success FROM jobs WHERE id = $1")
-        .bind(&job.id)
-        .fetch_one(&state.pool)
-        .await?;
-    let staged: Option<String> = row.try_get("staged_results")?;
+async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<String, ServiceError> {
+    let (staged, publish) = crate::jobs::staged_results(&state.pool, &job.id).await?;
     let staged = staged.ok_or_else(|| {
-        ApiError::new(StatusCode::CONFLICT, "no_results", "upload the results (PUT …/results) before reporting success")
+        ServiceError::conflict("no_results", "upload the results (PUT …/results) before reporting success")
     })?;
-    let upload: crate::results::Upload = serde_json::from_str(&staged).map_err(ApiError::internal)?;
+    let upload: crate::results::Upload = serde_json::from_str(&staged).map_err(ServiceError::internal)?;
     let info = match sanity_check(
         state,
         &crate::projects::by_id(&state.pool, &job.project_id)
             .await?
-            .ok_or_else(|| ApiError::internal("project vanished"))?,
+            .ok_or_else(|| ServiceError::internal("project vanished"))?,
         &job.commit_sha,
     )
     .await
     {
-        Ok(info) => serde_json::to_value(&info).map_err(ApiError::internal)?,
-        Err(problem) => return Err(ApiError::new(StatusCode::CONFLICT, "invalid_repository", problem)),
+        Ok(info) => serde_json::to_value(&info).map_err(ServiceError::internal)?,
+        Err(problem) => return Err(ServiceError::conflict("invalid_repository", problem)),
     };
     let staging = crate::results::staging_dir(&state.config.data_dir, &job.id);
     let mut tx = state.pool.begin().await?;
@@ -503,30 +444,21 @@ async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<Strin
             info: &info,
             commit_sha: &job.commit_sha,
             season: job.season,
-            publish: row.try_get::<i64, _>("publish_on_success")? != 0,
+            publish,
             upload: &upload,
         },
     )
     .await?;
-    let ended = sqlx::query(
-        "UPDATE jobs SET state = 'succeeded', finished_at = $1, token_hash = NULL, lease_expires_at = NULL, \
-         staged_results = NULL, message = $2 WHERE id = $3 AND state = 'running'",
-    )
-    .bind(now_ms())
-    .bind(format!("results: /results/{id}"))
-    .bind(&job.id)
-    .execute(&mut *tx)
-    .await?;
-    if ended.rows_affected() == 0 {
-        return Err(ApiError::new(StatusCode::GONE, "job_not_running", "the job is no longer running"));
+    if !crate::jobs::succeed_with_results(&mut tx, &job.id, &id).await? {
+        return Err(ServiceError::gone("job_not_running", "the job is no longer running"));
     }
     // Files first, then the commit: a failure leaves no result set without its files.
     let target = crate::results::files_dir(&state.config.data_dir, &id);
     if staging.exists() {
         if let Some(parent) = target.parent() {
-            tokio::fs::create_dir_all(parent).await.map_err(ApiError::internal)?;
+            tokio::fs::create_dir_all(parent).await.map_err(ServiceError::internal)?;
         }
-        tokio::fs::rename(&staging, &target).await.map_err(ApiError::internal)?;
+        tokio::fs::rename(&staging, &target).await.map_err(ServiceError::internal)?;
     }
     if let Err(e) = tx.commit().await {
         let _ = tokio::fs::rename(&target, &staging).await;

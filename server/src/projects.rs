@@ -2,9 +2,8 @@
 //! visibility, and who may read or push it.
 
 use crate::accounts::User;
-use crate::error::ApiError;
-use crate::now_ms;
-use axum::http::StatusCode;
+use crate::error::ServiceError;
+use crate::{now_ms, AppState};
 use sqlx::{AnyPool, Row};
 
 /// Who can see a project (its repository, pipelines and technique page).
@@ -21,12 +20,12 @@ pub enum Visibility {
 
 impl Visibility {
     /// Parses `private`, `internal` or `public`.
-    pub fn parse(text: &str) -> Result<Visibility, ApiError> {
+    pub fn parse(text: &str) -> Result<Visibility, ServiceError> {
         match text {
             "private" => Ok(Visibility::Private),
             "internal" => Ok(Visibility::Internal),
             "public" => Ok(Visibility::Public),
-            other => Err(ApiError::bad_request(
+            other => Err(ServiceError::invalid(
                 "invalid_visibility",
                 format!("visibility {other:?} is unknown: use private, internal or public"),
             )),
@@ -47,11 +46,11 @@ pub struct ProjectName(String);
 
 impl ProjectName {
     /// Checks the rules.
-    pub fn parse(text: &str) -> Result<ProjectName, ApiError> {
-        if fbksd_manager::technique::is_valid_short_name(text) {
+    pub fn parse(text: &str) -> Result<ProjectName, ServiceError> {
+        if fbksd_exchange::technique::is_valid_short_name(text) {
             Ok(ProjectName(text.to_string()))
         } else {
-            Err(ApiError::bad_request(
+            Err(ServiceError::invalid(
                 "invalid_name",
                 format!("project name {text:?} must be 1 to 64 lower-case letters, digits, '-' or '_'"),
             ))
@@ -109,7 +108,7 @@ pub async fn insert(
     owner: &User,
     name: &ProjectName,
     visibility: Visibility,
-) -> Result<Project, ApiError> {
+) -> Result<Project, ServiceError> {
     let project = Project {
         id: uuid::Uuid::new_v4().to_string(),
         name: name.0.clone(),
@@ -128,13 +127,38 @@ pub async fn insert(
             .await;
     match inserted {
         Ok(_) => Ok(project),
-        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => Err(ApiError::new(
-            StatusCode::CONFLICT,
+        Err(sqlx::Error::Database(e)) if e.is_unique_violation() => Err(ServiceError::conflict(
             "name_taken",
             format!("a project named {:?} exists: choose another name", project.name),
         )),
         Err(e) => Err(e.into()),
     }
+}
+
+/// Creates a project row and its repository, or neither.
+pub async fn create(state: &AppState, owner: &User, name: &str, visibility: &str) -> Result<Project, ServiceError> {
+    let name = ProjectName::parse(name)?;
+    let visibility = Visibility::parse(visibility)?;
+    let project = insert(&state.pool, owner, &name, visibility).await?;
+    if let Err(e) = state.git.create(&project.id).await {
+        sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
+        state.git.delete(&project.id).await;
+        return Err(ServiceError::internal(e));
+    }
+    Ok(project)
+}
+
+/// Deletes a project, its repository, jobs and unpublished result sets
+/// (published ones stay on the leaderboard).
+pub async fn delete(state: &AppState, project: &Project) -> Result<(), ServiceError> {
+    for set in crate::results::of_project(&state.pool, &project.id).await? {
+        if set.published_at.is_none() {
+            crate::results::discard(&state.pool, &state.config.data_dir, &set.id).await?;
+        }
+    }
+    sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
+    state.git.delete(&project.id).await;
+    Ok(())
 }
 
 /// The project named `name`, if any.
@@ -153,7 +177,7 @@ pub async fn by_id(pool: &AnyPool, id: &str) -> Result<Option<Project>, sqlx::Er
 
 /// The project named `name` if `user` may read it; otherwise 404, so
 /// private names do not leak.
-pub async fn readable(pool: &AnyPool, name: &str, user: Option<&User>) -> Result<Project, ApiError> {
+pub async fn readable(pool: &AnyPool, name: &str, user: Option<&User>) -> Result<Project, ServiceError> {
     match by_name(pool, name).await? {
         Some(p) if p.readable_by(user) => Ok(p),
         _ => Err(not_found(name)),
@@ -161,18 +185,18 @@ pub async fn readable(pool: &AnyPool, name: &str, user: Option<&User>) -> Result
 }
 
 /// The project named `name` if `user` may change it (403 if they may only read it).
-pub async fn writable(pool: &AnyPool, name: &str, user: &User) -> Result<Project, ApiError> {
+pub async fn writable(pool: &AnyPool, name: &str, user: &User) -> Result<Project, ServiceError> {
     let project = readable(pool, name, Some(user)).await?;
     if project.writable_by(user) {
         Ok(project)
     } else {
-        Err(ApiError::forbidden("not_owner", format!("only the owner of {name} can do this")))
+        Err(ServiceError::forbidden("not_owner", format!("only the owner of {name} can do this")))
     }
 }
 
 /// 404 for a project.
-pub fn not_found(name: &str) -> ApiError {
-    ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no project named {name:?} that you can see"))
+pub fn not_found(name: &str) -> ServiceError {
+    ServiceError::not_found(format!("no project named {name:?} that you can see"))
 }
 
 /// Projects `user` can see (all of theirs, and others' internal and public ones), by name.

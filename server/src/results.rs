@@ -4,101 +4,21 @@
 //! unpublishing takes it off; discarding deletes it; an administrator can
 //! hide a set that breaks the rules.
 //!
-//! # Upload format (`PUT /api/v1/jobs/<id>/results`)
-//!
-//! ```json
-//! {
-//!   "runs": [ <fbksd-results index entries: technique, scene, spp, status, message,
-//!             log, image, technique_ms, render_ms, used_samples, metrics> ],
-//!   "metrics": [ {"acronym": "MSE", "name": "…", "reference": "…",
-//!                 "lower_is_better": true, "has_error_map": true} ],
-//!   "scenes": [ {"name": "…", "tags": ["…"], "scene_hash": "…", "reference_hash": "…"} ],
-//!   "provenance": { "image_digest": "…", "machine": {…}, … }
-//! }
-//! ```
-//! Runs are the `fbksd results` index entries, so a local results
-//! directory and a server result set speak one format. A run's `image`
-//! names a file uploaded with `PUT /api/v1/jobs/<id>/files/<name>`.
+//! What a runner uploads ([`Upload`]) is a type of the runner API in
+//! `fbksd_exchange`, which the runner serialises too.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::now_ms;
-use axum::http::StatusCode;
-use fbksd_iqa::MetricInfo;
-use fbksd_manager::results::IndexEntry;
-use serde::{Deserialize, Serialize};
+use fbksd_exchange::MetricInfo;
+use serde::Serialize;
 use sqlx::{AnyPool, Row};
 use std::collections::{BTreeMap, BTreeSet};
 
-/// A scene a result set was measured on.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SceneProvenance {
-    /// Scene name.
-    pub name: String,
-    /// Its tags (filters on the leaderboard).
-    #[serde(default)]
-    pub tags: Vec<String>,
-    /// Hash of the scene files.
-    pub scene_hash: String,
-    /// Hash of the reference image.
-    pub reference_hash: String,
-}
-
-/// What a runner uploads for a benchmark job.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Upload {
-    /// One entry per (scene, spp).
-    pub runs: Vec<IndexEntry>,
-    /// The metrics the values are in.
-    pub metrics: Vec<MetricInfo>,
-    /// The scenes.
-    pub scenes: Vec<SceneProvenance>,
-    /// Image digest, runner, machine and anything else that pins the run.
-    pub provenance: serde_json::Map<String, serde_json::Value>,
-}
-
-impl Upload {
-    /// Checks the upload's consistency; the message names the first problem.
-    pub fn check(&self, files: &BTreeSet<String>) -> Result<(), String> {
-        if self.runs.is_empty() {
-            return Err("results: \"runs\" is empty".into());
-        }
-        let scenes: BTreeSet<&str> = self.scenes.iter().map(|s| s.name.as_str()).collect();
-        let metrics: BTreeSet<&str> = self.metrics.iter().map(|m| m.acronym.as_str()).collect();
-        let mut seen = BTreeSet::new();
-        for (i, run) in self.runs.iter().enumerate() {
-            let at = format!("results: runs[{i}] ({} at {} spp)", run.scene, run.spp);
-            if !scenes.contains(run.scene.as_str()) {
-                return Err(format!("{at}: scene {:?} is not in \"scenes\"", run.scene));
-            }
-            if !seen.insert((run.scene.as_str(), run.spp)) {
-                return Err(format!("{at}: appears twice"));
-            }
-            for (metric, value) in &run.metrics {
-                if !metrics.contains(metric.as_str()) {
-                    return Err(format!("{at}: metric {metric:?} is not in \"metrics\""));
-                }
-                if !value.is_finite() {
-                    return Err(format!("{at}: {metric} is {value}; only finite values are stored"));
-                }
-            }
-            if !run.technique_ms.is_finite() || !run.render_ms.is_finite() {
-                return Err(format!("{at}: times must be finite"));
-            }
-            if let Some(image) = &run.image {
-                if !files.contains(image) {
-                    return Err(format!("{at}: image {image:?} was not uploaded"));
-                }
-            }
-        }
-        Ok(())
-    }
-}
+pub use fbksd_exchange::runner_api::{SceneProvenance, Upload};
 
 /// The name of an uploaded file: letters, digits, `.`, `-`, `_` and `/`
 /// between non-empty parts, no `..`.
-pub fn check_file_name(name: &str) -> Result<(), ApiError> {
+pub fn check_file_name(name: &str) -> Result<(), ServiceError> {
     let ok = !name.is_empty()
         && name.len() <= 200
         && name.split('/').all(|p| !p.is_empty() && p != "." && p != "..")
@@ -106,7 +26,28 @@ pub fn check_file_name(name: &str) -> Result<(), ApiError> {
     if ok {
         Ok(())
     } else {
-        Err(ApiError::bad_request("invalid_file_name", format!("file name {name:?}: use letters, digits, . - _ and /")))
+        Err(ServiceError::invalid("invalid_file_name", format!("file name {name:?}: use letters, digits, . - _ and /")))
+    }
+}
+
+/// The set `id` if `user` may see it: its owner and administrators always;
+/// everyone once it is published and not hidden. Otherwise not found, so
+/// private sets do not reveal that they exist.
+pub async fn visible(
+    pool: &AnyPool,
+    id: &str,
+    user: Option<&crate::accounts::User>,
+) -> Result<ResultSet, ServiceError> {
+    if uuid::Uuid::parse_str(id).is_err() {
+        return Err(ServiceError::invalid("invalid_uuid", format!("{id:?} is not a result UUID")));
+    }
+    let not_found = || ServiceError::not_found(format!("no result set {id} that you can see"));
+    let set = get(pool, id).await?.ok_or_else(not_found)?;
+    let owner = user.is_some_and(|u| set.user_id.as_deref() == Some(u.id.as_str()) || u.is_admin);
+    if owner || set.is_public() {
+        Ok(set)
+    } else {
+        Err(not_found())
     }
 }
 
@@ -354,7 +295,7 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
     .bind(new.info.to_string())
     .bind(new.commit_sha)
     .bind(new.season)
-    .bind(serde_json::Value::Object(new.upload.provenance.clone()).to_string())
+    .bind(serde_json::to_string(&new.upload.provenance).unwrap_or_default())
     .bind(serde_json::to_string(&new.upload.metrics).unwrap_or_default())
     .bind(now)
     .bind(if new.publish { Some(now) } else { None })
@@ -421,10 +362,10 @@ async fn unpublish_others(
 
 /// The result set `id` if `user_id` owns it: 404 for an invalid or unknown
 /// UUID or another user's set (which it does not reveal).
-pub async fn owned(pool: &AnyPool, id: &str, user_id: &str) -> Result<ResultSet, ApiError> {
-    let not_found = || ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {id:?} of yours"));
+pub async fn owned(pool: &AnyPool, id: &str, user_id: &str) -> Result<ResultSet, ServiceError> {
+    let not_found = || ServiceError::not_found(format!("no result set {id:?} of yours"));
     if uuid::Uuid::parse_str(id).is_err() {
-        return Err(ApiError::bad_request("invalid_uuid", format!("{id:?} is not a result UUID")));
+        return Err(ServiceError::invalid("invalid_uuid", format!("{id:?} is not a result UUID")));
     }
     match get(pool, id).await? {
         Some(set) if set.user_id.as_deref() == Some(user_id) => Ok(set),
@@ -434,9 +375,9 @@ pub async fn owned(pool: &AnyPool, id: &str, user_id: &str) -> Result<ResultSet,
 
 /// Puts the set on its season's leaderboard, replacing the technique's
 /// previously published set there.
-pub async fn publish(pool: &AnyPool, set: &ResultSet) -> Result<(), ApiError> {
+pub async fn publish(pool: &AnyPool, set: &ResultSet) -> Result<(), ServiceError> {
     if set.hidden_reason.is_some() {
-        return Err(ApiError::forbidden("hidden", "an administrator hid this result set; it cannot be published"));
+        return Err(ServiceError::forbidden("hidden", "an administrator hid this result set; it cannot be published"));
     }
     let mut tx = pool.begin().await?;
     unpublish_others(&mut tx, &set.technique, set.season).await?;

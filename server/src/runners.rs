@@ -4,7 +4,7 @@
 //! (`fbksdj_…`) that can only report on that job.
 
 use crate::accounts::{digest, random_token};
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::now_ms;
 use sqlx::{AnyPool, Row};
 
@@ -81,17 +81,17 @@ pub async fn register(
     registration_token: &str,
     name: &str,
     machine: &serde_json::Value,
-) -> Result<(String, String), ApiError> {
+) -> Result<(String, String), ServiceError> {
     let stored =
         sqlx::query("SELECT value FROM settings WHERE key = $1").bind(REGISTRATION_KEY).fetch_optional(pool).await?;
     let valid =
         stored.map(|r| r.try_get::<String, _>("value")).transpose()?.is_some_and(|h| h == digest(registration_token));
     if !valid {
-        return Err(ApiError::unauthorized("wrong runner registration token: ask the server's administrator"));
+        return Err(ServiceError::unauthenticated("wrong runner registration token: ask the server's administrator"));
     }
     let name = name.trim();
     if name.is_empty() || name.len() > 100 {
-        return Err(ApiError::bad_request("invalid_name", "a runner needs a name of 1 to 100 characters"));
+        return Err(ServiceError::invalid("invalid_name", "a runner needs a name of 1 to 100 characters"));
     }
     let (id, token) = (uuid::Uuid::new_v4().to_string(), format!("{RUNNER_TOKEN_PREFIX}{}", random_token()));
     let now = now_ms();
@@ -172,10 +172,7 @@ pub async fn all(pool: &AnyPool) -> Result<Vec<Runner>, sqlx::Error> {
 
 /// Removes a runner (administration); its running jobs lose their lease at once.
 pub async fn remove(pool: &AnyPool, runner_id: &str) -> Result<bool, sqlx::Error> {
-    sqlx::query("UPDATE jobs SET lease_expires_at = 0 WHERE runner_id = $1 AND state = 'running'")
-        .bind(runner_id)
-        .execute(pool)
-        .await?;
+    crate::jobs::drop_leases_of(pool, runner_id).await?;
     let done = sqlx::query("DELETE FROM runners WHERE id = $1").bind(runner_id).execute(pool).await?;
     Ok(done.rows_affected() > 0)
 }

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{spawn, Db};
+use common::{json_of, spawn, Db};
 use serde_json::{json, Value};
 
 async fn register(client: &reqwest::Client, url: &str, email: &str, password: &str) -> reqwest::Response {
@@ -181,15 +181,8 @@ on_both_databases!(access_tokens_authenticate_scripts_until_revoked, |db: Db| as
     let script = reqwest::Client::new();
     let me = script.get(format!("{}/api/v1/me", server.url)).bearer_auth(&token).send().await.unwrap();
     assert_eq!(me.json::<Value>().await.unwrap()["email"], "tim@example.org");
-    let listed: Value = script
-        .get(format!("{}/api/v1/tokens", server.url))
-        .bearer_auth(&token)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let (_, listed) =
+        json_of(script.get(format!("{}/api/v1/tokens", server.url)).bearer_auth(&token).send().await.unwrap()).await;
     assert_eq!(listed[0]["name"], "laptop git");
     assert!(listed[0]["last_used_at"].is_i64(), "use is recorded");
     assert!(!listed.to_string().contains(&token[6..]), "the secret is never listed");

@@ -23,8 +23,7 @@ fn a_c_box_filter_matches_the_rust_box_filter_bit_for_bit() {
         .unwrap();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     for spp in [1, 7, 16] {
-        let read =
-            |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/conformance/{spp}_0.exr"))).unwrap();
+        let read = |t: &str| fbksd_iqa::image::read_exr(&results.join(format!("{t}/conformance/{spp}_0.exr"))).unwrap();
         let (rust, c) = (read("rust"), read("c"));
         assert_eq!(
             rust.2.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
@@ -86,8 +85,7 @@ fn the_thesis_cpp_examples_compile_unchanged_and_run() {
         .unwrap();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     for spp in [4, 16] {
-        let read =
-            |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/examples/{spp}_0.exr"))).unwrap().2;
+        let read = |t: &str| fbksd_iqa::image::read_exr(&results.join(format!("{t}/examples/{spp}_0.exr"))).unwrap().2;
         // A.1 sums in single precision; the Rust box filter in double.
         let (rust, a1) = (read("rust"), read("a1"));
         for (r, c) in rust.iter().zip(&a1) {
@@ -137,7 +135,7 @@ fn a_cpp_technique_builds_with_find_package_and_matches_the_rust_box_filter() {
         .args(["-t", &format!("cpp={}", build.join("box-filter-cpp").display())])
         .args(["-r", &bin("fbksd-analytic-renderer"), "-s", scene.to_str().unwrap()])
         .args(["--spp", "5", "--results", results.to_str().unwrap()]));
-    let read = |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/cmake/5_0.exr"))).unwrap().2;
+    let read = |t: &str| fbksd_iqa::image::read_exr(&results.join(format!("{t}/cmake/5_0.exr"))).unwrap().2;
     assert_eq!(read("rust"), read("cpp"));
 }
 
@@ -161,7 +159,7 @@ fn the_cpp_stratified_sampler_places_every_sample_itself_within_budget() {
         assert_eq!(log["status"], "ok", "{log}");
         assert_eq!(log["used_samples"], spp * 29 * 13);
         let read =
-            |t: &str| fbksd_manager::results::read_exr(&results.join(format!("{t}/stratified/{spp}_0.exr"))).unwrap().2;
+            |t: &str| fbksd_iqa::image::read_exr(&results.join(format!("{t}/stratified/{spp}_0.exr"))).unwrap().2;
         let (own, renderer) = (read("stratified"), read("box"));
         let mean = |v: &[f32]| v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64;
         // Both estimate the same image: their means agree to a few percent.

@@ -118,7 +118,7 @@ fn a_scene_directory_brings_its_renderer_and_budgets() {
         .output()
         .unwrap();
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    let (w, h, _) = fbksd_manager::results::read_exr(&results.join("box-filter/sphere/1_0.exr")).unwrap();
+    let (w, h, _) = fbksd_iqa::image::read_exr(&results.join("box-filter/sphere/1_0.exr")).unwrap();
     assert_eq!((w, h), (500, 500));
 }
 

@@ -34,8 +34,8 @@ fn the_thesis_renderer_a4_serves_the_rust_box_filter() {
     let stdout = String::from_utf8_lossy(&output.stdout);
     // At 1 spp the count scenario cannot split its budget in two; the box filter must still be fine.
     for spp in [1, 3] {
-        let (w, h, rgb) = fbksd_manager::results::read_exr(&results.join(format!("box/blue/{spp}_0.exr")))
-            .unwrap_or_else(|e| {
+        let (w, h, rgb) =
+            fbksd_iqa::image::read_exr(&results.join(format!("box/blue/{spp}_0.exr"))).unwrap_or_else(|e| {
                 panic!("box filter at {spp} spp: {e}\n{stdout}{}", String::from_utf8_lossy(&output.stderr))
             });
         assert_eq!((w, h), (1000, 1000));

@@ -25,10 +25,9 @@ fn every_small_production_scene_runs_through_fbksd_run() {
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     // The technique's image is the box filter of exactly the samples the
     // renderer draws in process for the same request.
-    let meta = fbksd_manager::scenes::SceneMeta::load(&pool().join("cornell-box")).unwrap();
+    let meta = fbksd_exchange::scenes::SceneMeta::load(&pool().join("cornell-box")).unwrap();
     let scene = fbksd_embree::pbrt::load(&meta.scene_file()).unwrap();
-    let (w, h, served) =
-        fbksd_manager::results::read_exr(&results.join("box-filter/cornell-box-small/2_0.exr")).unwrap();
+    let (w, h, served) = fbksd_iqa::image::read_exr(&results.join("box-filter/cornell-box-small/2_0.exr")).unwrap();
     assert_eq!((w, h), (128, 128));
     let ours = fbksd_embree::render::render_image(&scene, 2, 0);
     let worst = served.iter().zip(&ours.rgb).map(|(a, b)| (a - b).abs() / b.abs().max(1e-3)).fold(0f32, f32::max);

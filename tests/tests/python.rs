@@ -17,7 +17,7 @@ fn fbksd_run(args: &[String]) -> Output {
 }
 
 fn read(results: &Path, technique: &str, scene: &str, spp: u32) -> Vec<f32> {
-    fbksd_manager::results::read_exr(&results.join(format!("{technique}/{scene}/{spp}_0.exr"))).unwrap().2
+    fbksd_iqa::image::read_exr(&results.join(format!("{technique}/{scene}/{spp}_0.exr"))).unwrap().2
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! End-to-end runs through real processes: manager, analytic renderer and
 //! techniques, each scenario a user could meet.
 
-use fbksd_manager::results::read_exr;
+use fbksd_iqa::image::read_exr;
 use fbksd_manager::{Benchmark, Limits, RunRecord, RunStatus, SceneRunner, SceneSpec, TechniqueLaunch, TechniqueSpec};
 use fbksd_tests::{analytic_scene, bin, renderer_argv};
 use std::path::Path;

@@ -64,7 +64,7 @@ pub fn references(scenes: &[&str]) {
         if dir.join("reference.exr").is_file() {
             continue;
         }
-        let meta = fbksd_manager::scenes::SceneMeta::load(&dir).unwrap();
+        let meta = fbksd_exchange::scenes::SceneMeta::load(&dir).unwrap();
         let mut make = Command::new(bin_dir().join(format!("fbksd-{}", meta.renderer)));
         make.arg("reference").arg(&dir);
         locked("fbksd-references.lock", &mut make);

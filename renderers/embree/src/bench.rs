@@ -30,7 +30,7 @@ pub fn run(scenes: &[std::path::PathBuf], spp: u64, out_dir: Option<&Path>) -> a
                 rays = image.rays;
                 if let (Some(dir), true) = (out_dir, threads == cores && i == 0) {
                     std::fs::create_dir_all(dir)?;
-                    fbksd_manager::results::write_exr(
+                    fbksd_iqa::image::write_exr(
                         &dir.join(format!("{}.exr", scene.name)),
                         scene.width(),
                         scene.height(),
@@ -110,8 +110,8 @@ pub fn export_for_mitsuba(path: &Path, dir: &Path) -> anyhow::Result<()> {
 /// per-channel means, and the largest relative difference of block means
 /// (blocks of `block × block` pixels average the noise away).
 pub fn compare(a: &Path, b: &Path, block: usize) -> anyhow::Result<String> {
-    let (wa, ha, pa) = fbksd_manager::results::read_exr(a)?;
-    let (wb, hb, pb) = fbksd_manager::results::read_exr(b)?;
+    let (wa, ha, pa) = fbksd_iqa::image::read_exr(a)?;
+    let (wb, hb, pb) = fbksd_iqa::image::read_exr(b)?;
     anyhow::ensure!((wa, ha) == (wb, hb), "sizes differ: {wa}×{ha} and {wb}×{hb}");
     let (w, h) = (wa as usize, ha as usize);
     let mean = |p: &[f32], c: usize| p.iter().skip(c).step_by(3).map(|v| *v as f64).sum::<f64>() / (w * h) as f64;

@@ -101,9 +101,9 @@ fn run() -> anyhow::Result<()> {
                 eprintln!("warning: {} samples had non-finite values (replaced by 0)", image.repairs);
             }
             if out.extension().is_some_and(|e| e == "png") {
-                fbksd_manager::results::write_png_preview(&out, scene.width(), scene.height(), &image.rgb, 0.0)?;
+                fbksd_iqa::image::write_png_preview(&out, scene.width(), scene.height(), &image.rgb, 0.0)?;
             } else {
-                fbksd_manager::results::write_exr(&out, scene.width(), scene.height(), &image.rgb)?;
+                fbksd_iqa::image::write_exr(&out, scene.width(), scene.height(), &image.rgb)?;
             }
         }
         (Some(Command::Reference { scenes, force, spp }), _) => {

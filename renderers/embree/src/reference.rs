@@ -8,11 +8,11 @@
 //! beside the mean pixel value to read it against. A cached reference is
 //! rebuilt when the renderer version, the spp or the scene's files change
 //! (the rule every renderer shares:
-//! [`fbksd_manager::scenes::current_reference_note`]).
+//! [`fbksd_exchange::scenes::current_reference_note`]).
 
 use crate::render::render_image;
 use anyhow::{bail, Context};
-pub use fbksd_manager::scenes::{ReferenceMethod, SceneMeta};
+pub use fbksd_exchange::scenes::{ReferenceMethod, SceneMeta};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -31,7 +31,7 @@ pub struct ReferenceNote {
     pub repaired_samples: u64,
     /// What made it; a reference made by another version is rebuilt.
     pub generator: String,
-    /// The scene's digest ([`fbksd_manager::scenes::scene_digest`]); a
+    /// The scene's digest ([`fbksd_exchange::scenes::scene_digest`]); a
     /// reference of other scene files is rebuilt.
     #[serde(default)]
     pub scene_digest: String,
@@ -66,9 +66,9 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         bail!("{}: the Embree renderer makes references by rendering (\"method\": \"render\")", meta.name);
     };
     let spp = spp_override.unwrap_or(spp).max(2);
-    let digest = fbksd_manager::scenes::scene_digest(&meta.scene_file())?;
+    let digest = fbksd_exchange::scenes::scene_digest(&meta.scene_file())?;
     if !force {
-        if let Some(text) = fbksd_manager::scenes::current_reference_note(meta, &generator(), spp, &digest)? {
+        if let Some(text) = fbksd_exchange::scenes::current_reference_note(meta, &generator(), spp, &digest)? {
             return Ok(serde_json::from_str(&text)?);
         }
     }
@@ -95,7 +95,7 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir)?;
     }
-    fbksd_manager::results::write_exr(&out, scene.width(), scene.height(), &image)?;
+    fbksd_iqa::image::write_exr(&out, scene.width(), scene.height(), &image)?;
     let note = ReferenceNote {
         samples_per_pixel: spp,
         estimated_error: rms / 2.0,

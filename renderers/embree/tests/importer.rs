@@ -105,7 +105,7 @@ fn materials_textures_and_lights_are_read_with_their_parameters() {
     let png = dir.path().join("t.png");
     image::RgbImage::from_raw(2, 1, vec![255, 0, 0, 0, 0, 255]).unwrap().save(&png).unwrap();
     let exr = dir.path().join("r.exr");
-    fbksd_manager::results::write_exr(&exr, 1, 1, &[0.25, 0.25, 0.25]).unwrap();
+    fbksd_iqa::image::write_exr(&exr, 1, 1, &[0.25, 0.25, 0.25]).unwrap();
     let text = format!(
         "{CAMERA}WorldBegin\n\
          Texture \"img\" \"spectrum\" \"imagemap\" \"string filename\" \"t.png\" \"string wrap\" \"clamp\"\n\

@@ -76,9 +76,9 @@ fn run() -> anyhow::Result<()> {
             let scene = load(&scene)?;
             let image = fbksd_procedural::render::render_image(&scene, spp, 0).map_err(anyhow::Error::msg)?;
             if out.extension().is_some_and(|e| e == "png") {
-                fbksd_manager::results::write_png_preview(&out, scene.width, scene.height, &image, 0.0)?;
+                fbksd_iqa::image::write_png_preview(&out, scene.width, scene.height, &image, 0.0)?;
             } else {
-                fbksd_manager::results::write_exr(&out, scene.width, scene.height, &image)?;
+                fbksd_iqa::image::write_exr(&out, scene.width, scene.height, &image)?;
             }
         }
         (Some(Command::Reference { scenes, force, spp }), _) => {

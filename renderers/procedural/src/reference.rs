@@ -1,6 +1,6 @@
 //! Reference images of procedural scenes.
 //!
-//! A scene directory's `fbksd-scene.json` (see [`fbksd_manager::scenes`])
+//! A scene directory's `fbksd-scene.json` (see [`fbksd_exchange::scenes`])
 //! says how its reference is made. References are built by
 //! `fbksd-procedural reference <dir>`, cached beside the scene (not
 //! committed) and rebuilt when the sampler, the budget or the scene's files
@@ -16,7 +16,7 @@
 use crate::render::render_image;
 use crate::Scene;
 use anyhow::bail;
-pub use fbksd_manager::scenes::{ReferenceMethod, SceneMeta};
+pub use fbksd_exchange::scenes::{ReferenceMethod, SceneMeta};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::time::Instant;
@@ -38,7 +38,7 @@ pub struct ReferenceNote {
     /// made by another sampler is rebuilt.
     #[serde(default)]
     pub generator: String,
-    /// The scene's digest ([`fbksd_manager::scenes::scene_digest`]); a
+    /// The scene's digest ([`fbksd_exchange::scenes::scene_digest`]); a
     /// reference of other scene files is rebuilt.
     #[serde(default)]
     pub scene_digest: String,
@@ -66,7 +66,7 @@ impl std::fmt::Display for ReferenceNote {
 }
 
 /// Builds (or keeps, by the shared rule of
-/// [`fbksd_manager::scenes::current_reference_note`]) a scene's reference;
+/// [`fbksd_exchange::scenes::current_reference_note`]) a scene's reference;
 /// returns its note.
 pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
@@ -75,10 +75,10 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         ReferenceMethod::Render { spp } => spp_override.unwrap_or(*spp).max(2),
         ReferenceMethod::ClosedForm { .. } => spp_override.unwrap_or(256),
     };
-    let digest = fbksd_manager::scenes::scene_digest(&meta.scene_file())?;
+    let digest = fbksd_exchange::scenes::scene_digest(&meta.scene_file())?;
     if !force {
         if let Some(text) =
-            fbksd_manager::scenes::current_reference_note(meta, &generator(), samples_per_pixel, &digest)?
+            fbksd_exchange::scenes::current_reference_note(meta, &generator(), samples_per_pixel, &digest)?
         {
             return Ok(serde_json::from_str(&text)?);
         }
@@ -115,7 +115,7 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         }
     };
     let mean_value = image.iter().map(|v| *v as f64).sum::<f64>() / image.len() as f64;
-    fbksd_manager::results::write_exr(&out, scene.width, scene.height, &image)?;
+    fbksd_iqa::image::write_exr(&out, scene.width, scene.height, &image)?;
     let note = ReferenceNote {
         method: meta.reference.clone(),
         samples_per_pixel,

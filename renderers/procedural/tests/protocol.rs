@@ -252,7 +252,7 @@ fn every_experimental_scene_loads_and_matches_its_metadata() {
     let root = repo_root().join("scenes/experimental");
     let mut names = Vec::new();
     for entry in std::fs::read_dir(&root).unwrap() {
-        let meta = fbksd_manager::scenes::SceneMeta::load(&entry.unwrap().path()).unwrap();
+        let meta = fbksd_exchange::scenes::SceneMeta::load(&entry.unwrap().path()).unwrap();
         let scene = Scene::load(&meta.scene_file()).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!((scene.width, scene.height), (meta.width, meta.height), "{}", meta.name);
         assert_eq!(meta.renderer, "procedural");

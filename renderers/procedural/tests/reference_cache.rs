@@ -1,5 +1,5 @@
 //! The reference cache follows the one rule every renderer shares
-//! (`fbksd_manager::scenes::current_reference_note`).
+//! (`fbksd_exchange::scenes::current_reference_note`).
 //!
 //! Regression: a procedural reference was kept after its `.expr` changed
 //! (the Embree renderer rebuilt its own): a technique would have been

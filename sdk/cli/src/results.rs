@@ -3,10 +3,11 @@
 
 use anyhow::Context;
 use clap::Subcommand;
+use fbksd_exchange::ranking::rank;
+use fbksd_exchange::results::ResultsDir;
 use fbksd_iqa::external::ExternalMetric;
 use fbksd_iqa::Metric;
-use fbksd_manager::evaluation::{compute, find_scenes, rank, AnyMetric};
-use fbksd_manager::results::ResultsDir;
+use fbksd_manager::evaluation::{compute, find_scenes, AnyMetric};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 

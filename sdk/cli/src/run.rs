@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context};
 use clap::Args;
-use fbksd_manager::scenes::SceneMeta;
+use fbksd_exchange::scenes::SceneMeta;
 use fbksd_manager::{Benchmark, Limits, Progress, RunRecord, RunStatus, SceneSpec, TechniqueSpec};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -68,7 +68,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     for path in &args.scenes {
         if SceneMeta::is_meta(path) {
             let meta = SceneMeta::load(path)?;
-            let program = fbksd_manager::scenes::renderer_program(&meta.renderer)
+            let program = fbksd_exchange::scenes::renderer_program(&meta.renderer)
                 .map_err(anyhow::Error::msg)?
                 .to_string_lossy()
                 .into_owned();

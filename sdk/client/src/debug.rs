@@ -7,7 +7,7 @@
 //! (default `fbksd-debug.exr`) and a one-line summary goes to stderr.
 
 use crate::ClientError;
-use fbksd_manager::results::write_exr;
+use fbksd_iqa::image::write_exr;
 use fbksd_manager::{Limits, RunOutcome, SceneRunner, TechniqueLaunch};
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;

@@ -66,20 +66,8 @@ pub enum Metric {
     HdrFlip,
 }
 
-/// What a metric is, in the original FBKSD's IQA `info.json` terms.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MetricInfo {
-    /// Short name, e.g. `"MSE"`.
-    pub acronym: String,
-    /// Full name.
-    pub name: String,
-    /// Citation.
-    pub reference: String,
-    /// Whether smaller values are better.
-    pub lower_is_better: bool,
-    /// Whether the metric draws an error map.
-    pub has_error_map: bool,
-}
+/// What a metric is (shared with result uploads, hence defined with them).
+pub use fbksd_exchange::MetricInfo;
 
 impl Metric {
     /// Every built-in metric.

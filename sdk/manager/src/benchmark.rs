@@ -5,9 +5,10 @@
 //! technique starts once per (scene, budget), as in the original FBKSD.
 
 use crate::process::Launcher;
-use crate::record::{RunRecord, RunStatus};
-use crate::results::{path_safe_name, write_exr, write_json_atomically, ResultsDir};
 use crate::scene::{Limits, SceneRunner, TechniqueLaunch};
+use fbksd_exchange::record::{RunRecord, RunStatus};
+use fbksd_exchange::results::{path_safe_name, write_json_atomically, ResultsDir, RunFiles};
+use fbksd_iqa::image::write_exr;
 use std::io;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -85,8 +86,8 @@ impl Benchmark {
                 let dir = results.run_dir(&technique_name, &scene_name)?;
                 for &spp in &scene.spps {
                     progress(Progress::RunStarted { scene: &scene_name, technique: &technique_name, spp });
-                    let stem = format!("{spp}_0");
-                    let technique_log = dir.join(format!("{stem}_technique.log"));
+                    let files = RunFiles { spp };
+                    let technique_log = dir.join(files.technique_log());
                     let _ = std::fs::remove_file(&technique_log);
                     let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
                     let outcome = runner.run_with_progress(
@@ -95,7 +96,7 @@ impl Benchmark {
                         &technique_log,
                         &mut |delivered, budget| progress(Progress::Samples { delivered, budget }),
                     );
-                    let image_path = dir.join(format!("{stem}.exr"));
+                    let image_path = dir.join(files.image());
                     let _ = std::fs::remove_file(&image_path);
                     let mut status = outcome.status;
                     let mut message = outcome.message;
@@ -126,10 +127,10 @@ impl Benchmark {
                         times: outcome.times,
                         peak_memory_bytes: outcome.peak_memory_bytes,
                         requests: outcome.requests,
-                        image: image.as_ref().map(|_| format!("{stem}.exr")),
-                        technique_log: format!("{stem}_technique.log"),
+                        image: image.as_ref().map(|_| files.image()),
+                        technique_log: files.technique_log(),
                     };
-                    let log_path = dir.join(format!("{stem}_log.json"));
+                    let log_path = dir.join(files.log());
                     write_json_atomically(&log_path, &record)?;
                     results.record(&record, &log_path, image.as_deref())?;
                     progress(Progress::RunFinished(&record));

@@ -1,22 +1,16 @@
-//! Results computation and ranking: metric values and error maps for every
-//! run of a results directory, and the ranking of techniques.
+//! Metric values and error maps for every run of a results directory.
 //!
 //! `compute` is incremental: a run's metric is computed only when its value
-//! file (`<spp>_0_<METRIC>.json`) is missing; error maps go beside it as
-//! `<spp>_0_<METRIC>_map.png`. Values are also gathered into `index.json`.
-//!
-//! **Ranking** (fixing the original, where a missing result was simply not
-//! ranked, which favoured incomplete techniques): for every (scene, spp,
-//! metric), techniques are ranked 1 (best) to n, ties sharing the mean of
-//! their ranks; a technique with no value there (failed or missing run)
-//! takes rank n, the worst. A technique's score is its mean rank.
+//! file ([`RunFiles::metric_value`]) is missing; error maps go beside it
+//! ([`RunFiles::error_map`]). Values are also gathered into `index.json`.
+//! Ranking the techniques is [`fbksd_exchange::ranking`]'s.
 
-use crate::results::{path_safe_name, IndexEntry, ResultsDir};
-use crate::scenes::{SceneMeta, META_FILE};
+use fbksd_exchange::results::{path_safe_name, IndexEntry, ResultsDir, RunFiles};
+use fbksd_exchange::scenes::{SceneMeta, META_FILE};
 use fbksd_iqa::external::ExternalMetric;
 use fbksd_iqa::image::Image;
 use fbksd_iqa::{evaluate, Metric, MetricInfo, ValueRecord};
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::io;
 use std::path::{Path, PathBuf};
 
@@ -95,7 +89,7 @@ pub fn compute(
     let mut references: BTreeMap<String, Image> = BTreeMap::new();
     for entry in index.runs.iter_mut() {
         let what = format!("{} / {} / {} spp", entry.technique, entry.scene, entry.spp);
-        let Some(image) = entry.image.clone().filter(|_| entry.status == crate::RunStatus::Ok) else {
+        let Some(image) = entry.image.clone().filter(|_| entry.status == fbksd_exchange::RunStatus::Ok) else {
             summary.skipped.push(format!("{what}: status {}", entry.status));
             continue;
         };
@@ -118,8 +112,9 @@ pub fn compute(
         let mut test: Option<Image> = None;
         for metric in metrics {
             let acronym = metric.info().acronym;
-            let value_file = dir.join(format!("{}_0_{acronym}.json", entry.spp));
-            let map_file = dir.join(format!("{}_0_{acronym}_map.png", entry.spp));
+            let files = RunFiles { spp: entry.spp };
+            let value_file = dir.join(files.metric_value(&acronym));
+            let map_file = dir.join(files.error_map(&acronym));
             if let Ok(bytes) = std::fs::read(&value_file) {
                 if let Ok(v) = serde_json::from_slice::<ValueRecord>(&bytes) {
                     entry.metrics.insert(acronym, v.value);
@@ -164,126 +159,4 @@ pub fn compute(
     }
     results.write_index(index)?;
     Ok(summary)
-}
-
-/// A technique's place in the ranking.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Standing {
-    /// Technique.
-    pub technique: String,
-    /// Mean rank over every (scene, spp, metric); lower is better.
-    pub mean_rank: f64,
-    /// Groups in which it had a value.
-    pub ranked: usize,
-    /// Groups in which it had none (counted as last).
-    pub missing: usize,
-}
-
-/// Values of one (scene, spp, metric) group, by technique.
-type Group<'a> = Vec<(&'a str, f64)>;
-
-/// Ranks techniques by mean rank over (scene, spp, metric) groups.
-pub fn rank(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -> Vec<Standing> {
-    let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
-    let n = techniques.len();
-    // (scene, spp, metric) → (technique, value).
-    let mut groups: BTreeMap<(&str, u64, &str), Group> = BTreeMap::new();
-    for r in runs {
-        for (metric, value) in &r.metrics {
-            groups.entry((&r.scene, r.spp, metric)).or_default().push((&r.technique, *value));
-        }
-    }
-    let mut totals: BTreeMap<&str, (f64, usize, usize)> = techniques.iter().map(|t| (*t, (0.0, 0, 0))).collect();
-    for ((_, _, metric), mut values) in groups {
-        let lower = lower_is_better(metric);
-        values.retain(|(_, v)| !v.is_nan());
-        values.sort_by(|a, b| if lower { a.1.total_cmp(&b.1) } else { b.1.total_cmp(&a.1) });
-        let mut i = 0;
-        while i < values.len() {
-            let mut j = i;
-            while j + 1 < values.len() && values[j + 1].1 == values[i].1 {
-                j += 1;
-            }
-            let shared = (i + j) as f64 / 2.0 + 1.0;
-            for (t, _) in &values[i..=j] {
-                let e = totals.get_mut(t).unwrap();
-                e.0 += shared;
-                e.1 += 1;
-            }
-            i = j + 1;
-        }
-        let present: BTreeSet<&str> = values.iter().map(|(t, _)| *t).collect();
-        for t in &techniques {
-            if !present.contains(t) {
-                let e = totals.get_mut(t).unwrap();
-                e.0 += n as f64;
-                e.2 += 1;
-            }
-        }
-    }
-    let mut out: Vec<Standing> = totals
-        .into_iter()
-        .map(|(t, (sum, ranked, missing))| Standing {
-            technique: t.to_string(),
-            mean_rank: if ranked + missing == 0 { f64::NAN } else { sum / (ranked + missing) as f64 },
-            ranked,
-            missing,
-        })
-        .collect();
-    out.sort_by(|a, b| a.mean_rank.total_cmp(&b.mean_rank).then(a.technique.cmp(&b.technique)));
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn run(t: &str, scene: &str, spp: u64, metrics: &[(&str, f64)]) -> IndexEntry {
-        IndexEntry {
-            technique: t.into(),
-            scene: scene.into(),
-            spp,
-            status: crate::RunStatus::Ok,
-            message: String::new(),
-            log: String::new(),
-            image: None,
-            technique_ms: 0.0,
-            render_ms: 0.0,
-            used_samples: 0,
-            metrics: metrics.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
-        }
-    }
-
-    #[test]
-    fn ranks_by_direction_with_shared_ties() {
-        let runs = vec![
-            run("a", "s", 4, &[("MSE", 1.0), ("SSIM", 0.9)]),
-            run("b", "s", 4, &[("MSE", 2.0), ("SSIM", 0.9)]),
-            run("c", "s", 4, &[("MSE", 3.0), ("SSIM", 0.5)]),
-        ];
-        let r = rank(&runs, |m| m != "SSIM");
-        let get = |t: &str| r.iter().find(|s| s.technique == t).unwrap().mean_rank;
-        // a: MSE 1, SSIM 1.5 → 1.25; b: 2, 1.5 → 1.75; c: 3, 3 → 3.
-        assert_eq!((get("a"), get("b"), get("c")), (1.25, 1.75, 3.0));
-        assert_eq!(r[0].technique, "a");
-    }
-
-    /// Regression of the original: a technique with missing results was not
-    /// ranked there, so failing on the hard scenes improved its mean rank.
-    #[test]
-    fn a_missing_result_counts_as_last() {
-        let runs = vec![
-            run("good", "easy", 4, &[("MSE", 1.0)]),
-            run("good", "hard", 4, &[("MSE", 5.0)]),
-            run("good", "harder", 4, &[("MSE", 9.0)]),
-            run("quitter", "easy", 4, &[("MSE", 0.9)]),
-        ];
-        // Ignoring missing results, the quitter would rank 1.0 and the good one 1.33.
-        let r = rank(&runs, |_| true);
-        assert_eq!(r[0].technique, "good", "{r:?}");
-        assert!((r[0].mean_rank - 4.0 / 3.0).abs() < 1e-12);
-        let q = r.iter().find(|s| s.technique == "quitter").unwrap();
-        assert_eq!((q.ranked, q.missing), (1, 2));
-        assert!((q.mean_rank - 5.0 / 3.0).abs() < 1e-12);
-    }
 }

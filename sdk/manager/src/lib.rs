@@ -9,10 +9,13 @@
 //!
 //! - [`scene::SceneRunner`]: one scene, one renderer, successive runs.
 //! - [`benchmark::Benchmark`]: techniques × scenes × budgets into a results
-//!   directory ([`results`]).
+//!   directory ([`fbksd_exchange::results`]).
 //! - [`process`]: supervised child processes (CPU time and peak memory by `wait4`).
-//! - [`evaluation`]: metric values and error maps of a results directory, and ranking.
-//! - [`technique`]: a technique repository's `info.json`.
+//! - [`evaluation`]: metric values and error maps of a results directory.
+//!
+//! What its records, results directories and scene metadata look like is
+//! [`fbksd_exchange`]'s, shared with the CLI, the renderers, the runner and
+//! the server.
 //!
 //! ```no_run
 //! use fbksd_manager::{Benchmark, TechniqueSpec, SceneSpec, Limits};
@@ -34,15 +37,11 @@
 pub mod benchmark;
 pub mod evaluation;
 pub mod process;
-pub mod record;
-pub mod results;
 pub mod scene;
-pub mod scenes;
-pub mod technique;
 
 pub use benchmark::{Benchmark, Progress, SceneSpec, TechniqueSpec};
+pub use fbksd_exchange::record::{FailureReason, RunRecord, RunStatus, Times};
 pub use process::{LaunchSpec, Launcher, LocalLauncher, ProcessRole, Running};
-pub use record::{FailureReason, RunRecord, RunStatus, Times};
 pub use scene::{Limits, RunOutcome, SceneRunner, TechniqueLaunch};
 
 use std::time::Duration;

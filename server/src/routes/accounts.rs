@@ -2,7 +2,7 @@
 
 use super::{Caller, SessionUser};
 use crate::accounts::{self, Email, Password};
-use crate::error::ApiError;
+use crate::routes::ApiError;
 use crate::AppState;
 use axum::extract::{Query, State};
 use axum::http::{header, StatusCode};
@@ -23,21 +23,8 @@ pub struct Credentials {
 pub async fn register(State(state): State<AppState>, Json(body): Json<Credentials>) -> Result<Response, ApiError> {
     let email = Email::parse(&body.email)?;
     let password = Password::parse(&body.password)?;
-    let user = create_and_mail(&state, &email, &password).await?;
+    let user = accounts::register(&state, &email, &password).await?;
     Ok((StatusCode::CREATED, Json(json!({ "id": user.id, "email": user.email, "verified": false }))).into_response())
-}
-
-/// Creates an unverified account and mails its verification link.
-pub async fn create_and_mail(state: &AppState, email: &Email, password: &Password) -> Result<accounts::User, ApiError> {
-    let user = accounts::create_user(&state.pool, email, password, false, false).await?;
-    let token = accounts::issue_email_token(&state.pool, &user.id, "verify").await?;
-    let link = format!("{}/accounts/verify?token={token}", state.public_url);
-    let body = format!(
-        "Welcome to FBKSD.\n\nConfirm your e-mail address to use your account:\n\n{link}\n\n\
-         The link works once, for 48 hours. If you did not register, ignore this message.\n"
-    );
-    state.mailer.send(&state.config.mail_from, email.as_str(), "Confirm your FBKSD account", body).await?;
-    Ok(user)
 }
 
 /// A verification token.
@@ -60,7 +47,7 @@ pub async fn verify(
 pub async fn verify_link(State(state): State<AppState>, Query(body): Query<TokenBody>) -> Response {
     let verified = match accounts::redeem_email_token(&state.pool, &body.token, "verify").await {
         Ok(user_id) => accounts::mark_verified(&state.pool, &user_id).await.map_err(ApiError::from),
-        Err(e) => Err(e),
+        Err(e) => Err(e.into()),
     };
     let log_in = Some(("/login", "Log in"));
     match verified {

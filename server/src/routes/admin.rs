@@ -1,15 +1,13 @@
 //! Administration (API): jobs, runners, the registration token, seasons.
 
 use super::Admin;
-use crate::error::ApiError;
-use crate::pipelines::{Request, Source};
+use crate::routes::ApiError;
 use crate::AppState;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::Json;
 use serde::Deserialize;
 use serde_json::json;
-use sqlx::Row;
 
 /// `GET /api/v1/admin/jobs`: the latest jobs of everyone.
 pub async fn jobs(State(state): State<AppState>, Admin(_): Admin) -> Result<Json<Vec<crate::jobs::Job>>, ApiError> {
@@ -82,56 +80,6 @@ pub async fn new_season(
     State(state): State<AppState>,
     Admin(_): Admin,
     Json(body): Json<NewSeason>,
-) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
-    Ok((StatusCode::CREATED, Json(start_season(&state, &body.note).await?)))
-}
-
-/// Starts a season and queues the re-runs; what was queued and skipped.
-pub async fn start_season(state: &AppState, note: &str) -> Result<serde_json::Value, ApiError> {
-    let note = note.trim();
-    if note.is_empty() {
-        return Err(ApiError::bad_request("missing_note", "say what changed in the scene pool"));
-    }
-    let previous = crate::results::current_season(&state.pool).await?;
-    let published = crate::results::published(&state.pool, previous).await?;
-    sqlx::query("INSERT INTO seasons (number, note, started_at) VALUES ($1, $2, $3)")
-        .bind(previous + 1)
-        .bind(note)
-        .bind(crate::now_ms())
-        .execute(&state.pool)
-        .await?;
-    crate::results::boards_changed(&state.pool).await?;
-    let mut queued = Vec::new();
-    let mut skipped = Vec::new();
-    for set in published {
-        let row = sqlx::query("SELECT p.id FROM projects p WHERE p.name = $1")
-            .bind(&set.technique)
-            .fetch_optional(&state.pool)
-            .await?;
-        let project = match row {
-            Some(r) => crate::projects::by_id(&state.pool, &r.try_get::<String, _>("id")?).await?,
-            None => None,
-        };
-        let owner = match &project {
-            Some(p) => crate::accounts::user_by_id(&state.pool, &p.owner_id).await?,
-            None => None,
-        };
-        match (project, owner) {
-            (Some(project), Some(owner)) => {
-                let started = crate::pipelines::start(
-                    state,
-                    &project,
-                    &owner,
-                    &set.commit_sha,
-                    "season",
-                    Request::Run,
-                    Source::Season,
-                )
-                .await?;
-                queued.push(json!({ "technique": set.technique, "job": started.job.id }));
-            }
-            _ => skipped.push(json!({ "technique": set.technique, "why": "its project or owner was deleted" })),
-        }
-    }
-    Ok(json!({ "season": previous + 1, "queued": queued, "skipped": skipped }))
+) -> Result<(StatusCode, Json<crate::admin::SeasonStarted>), ApiError> {
+    Ok((StatusCode::CREATED, Json(crate::admin::start_season(&state, &body.note).await?)))
 }

@@ -11,19 +11,20 @@
 
 mod accounts;
 mod admin;
+pub mod error;
 mod pages;
 mod projects;
 mod results;
 mod runner;
 
 use crate::accounts::User;
-use crate::error::ApiError;
 use crate::AppState;
 use axum::extract::FromRequestParts;
 use axum::http::request::Parts;
 use axum::http::Method;
 use axum::routing::{any, delete, get, post, put};
 use axum::Router;
+pub use error::ApiError;
 
 /// Name of the session cookie.
 pub const SESSION_COOKIE: &str = "fbksd_session";
@@ -280,7 +281,7 @@ impl FromRequestParts<AppState> for JobCaller {
         if job_id != path_job {
             return Err(ApiError::forbidden("wrong_job", "this job token belongs to another job"));
         }
-        if job_state != "running" {
+        if job_state != crate::jobs::JobState::Running {
             return Err(ApiError::new(
                 axum::http::StatusCode::GONE,
                 "lease_lost",

@@ -3,10 +3,10 @@
 
 use super::{Caller, MaybeUser};
 use crate::accounts::User;
-use crate::error::ApiError;
-use crate::jobs::Job;
+use crate::jobs::{Job, JobState};
 use crate::pipelines::{Request, Source};
-use crate::projects::{self, Project, ProjectName, Visibility};
+use crate::projects::{self, Project};
+use crate::routes::ApiError;
 use crate::AppState;
 use axum::body::Body;
 use axum::extract::{Path, Query, State};
@@ -50,26 +50,8 @@ pub async fn create(
     caller: Caller,
     Json(body): Json<NewProject>,
 ) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
-    let project = create_with_repository(&state, &caller.user, &body.name, &body.visibility).await?;
+    let project = projects::create(&state, &caller.user, &body.name, &body.visibility).await?;
     Ok((StatusCode::CREATED, Json(project_json(&state, &project))))
-}
-
-/// Creates a project row and its repository, or neither.
-pub async fn create_with_repository(
-    state: &AppState,
-    owner: &User,
-    name: &str,
-    visibility: &str,
-) -> Result<Project, ApiError> {
-    let name = ProjectName::parse(name)?;
-    let visibility = Visibility::parse(visibility)?;
-    let project = projects::insert(&state.pool, owner, &name, visibility).await?;
-    if let Err(e) = state.git.create(&project.id).await {
-        sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
-        state.git.delete(&project.id).await;
-        return Err(ApiError::internal(e));
-    }
-    Ok(project)
 }
 
 /// `GET /api/v1/projects`: the projects the caller can see.
@@ -110,13 +92,7 @@ pub async fn delete(
     Path(name): Path<String>,
 ) -> Result<StatusCode, ApiError> {
     let project = projects::writable(&state.pool, &name, &caller.user).await?;
-    for set in crate::results::of_project(&state.pool, &project.id).await? {
-        if set.published_at.is_none() {
-            crate::results::discard(&state.pool, &state.config.data_dir, &set.id).await?;
-        }
-    }
-    sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
-    state.git.delete(&project.id).await;
+    projects::delete(&state, &project).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -150,19 +126,9 @@ pub async fn run_pipeline(
         crate::pipelines::start(&state, &project, &caller.user, &commit, &git_ref, request, Source::Api).await?;
     // A repository that fails its checks is a failed job (in the history, mailed),
     // and the caller is told at once.
-    let status = if started.job.state == "failed" { StatusCode::UNPROCESSABLE_ENTITY } else { StatusCode::CREATED };
+    let status =
+        if started.job.state == JobState::Failed { StatusCode::UNPROCESSABLE_ENTITY } else { StatusCode::CREATED };
     Ok((status, Json(started)))
-}
-
-/// The job `id` if `user` can read its project; 404 otherwise (and for an invalid id).
-pub async fn readable_job(state: &AppState, id: &str, user: Option<&User>) -> Result<(Job, Project), ApiError> {
-    let not_found = || ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no job {id:?} that you can see"));
-    let job = crate::jobs::get(&state.pool, id).await?.ok_or_else(not_found)?;
-    let project = projects::by_id(&state.pool, &job.project_id).await?.ok_or_else(not_found)?;
-    if !project.readable_by(user) {
-        return Err(not_found());
-    }
-    Ok((job, project))
 }
 
 /// `GET /api/v1/jobs/{id}`.
@@ -171,7 +137,7 @@ pub async fn job(
     MaybeUser(user): MaybeUser,
     Path(id): Path<String>,
 ) -> Result<Json<Job>, ApiError> {
-    Ok(Json(readable_job(&state, &id, user.as_ref()).await?.0))
+    Ok(Json(crate::jobs::readable(&state.pool, &id, user.as_ref()).await?.0))
 }
 
 /// Where to continue a log.
@@ -188,7 +154,7 @@ pub async fn log(
     Path(id): Path<String>,
     Query(after): Query<After>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
-    let (job, _) = readable_job(&state, &id, user.as_ref()).await?;
+    let (job, _) = crate::jobs::readable(&state.pool, &id, user.as_ref()).await?;
     let chunks = crate::jobs::log_since(&state.pool, &id, after.after).await?;
     Ok(Json(json!({
         "state": job.state,
@@ -205,7 +171,7 @@ pub async fn log_stream(
     MaybeUser(user): MaybeUser,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    readable_job(&state, &id, user.as_ref()).await?;
+    crate::jobs::readable(&state.pool, &id, user.as_ref()).await?;
     let stream = async_stream(state, id);
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
 }
@@ -226,10 +192,10 @@ fn async_stream(
                 return Some((Ok(event), (state, id, *seq, false)));
             }
             let job_state = crate::jobs::get(&state.pool, &id).await.ok().flatten().map(|j| j.state);
-            match job_state.as_deref() {
-                Some("queued") | Some("running") => tokio::time::sleep(std::time::Duration::from_millis(300)).await,
+            match job_state {
+                Some(live) if live.is_live() => tokio::time::sleep(std::time::Duration::from_millis(300)).await,
                 other => {
-                    let event = Event::default().event("end").data(other.unwrap_or("gone"));
+                    let event = Event::default().event("end").data(other.map_or("gone", JobState::as_str));
                     return Some((Ok(event), (state, id, after, true)));
                 }
             }
@@ -243,20 +209,8 @@ pub async fn cancel(
     caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Json<Job>, ApiError> {
-    cancel_as(&state, &id, &caller.user).await?;
+    crate::jobs::cancel_as(&state.pool, &id, &caller.user).await?;
     Ok(Json(crate::jobs::get(&state.pool, &id).await?.ok_or_else(|| ApiError::internal("job vanished"))?))
-}
-
-/// Cancels job `id` if `user` owns its project or is an administrator.
-pub async fn cancel_as(state: &AppState, id: &str, user: &User) -> Result<(), ApiError> {
-    let (job, project) = readable_job(state, id, Some(user)).await?;
-    if !(project.writable_by(user) || user.is_admin) {
-        return Err(ApiError::forbidden(
-            "not_owner",
-            "only the project's owner or an administrator can cancel its jobs",
-        ));
-    }
-    crate::jobs::cancel(&state.pool, &job.id, &user.email).await
 }
 
 /// Who a git request authenticates as: HTTP Basic with a personal access
@@ -282,7 +236,7 @@ async fn git_caller(state: &AppState, headers: &HeaderMap) -> Result<GitCaller, 
     };
     if secret.starts_with(crate::jobs::JOB_TOKEN_PREFIX) {
         if let Some((job_id, job_state, _)) = crate::jobs::token_job(&state.pool, &secret).await? {
-            if job_state == "running" {
+            if job_state == JobState::Running {
                 return Ok(GitCaller::Job(job_id));
             }
         }

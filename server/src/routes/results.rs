@@ -1,10 +1,9 @@
 //! Result sets and the leaderboard (API), and result files.
 
 use super::{Admin, Caller, MaybeUser};
-use crate::accounts::User;
-use crate::error::ApiError;
 use crate::leaderboard::{self, BoardQuery};
-use crate::results::{self, ResultSet};
+use crate::results;
+use crate::routes::ApiError;
 use crate::AppState;
 use axum::extract::{Path, Query, State};
 use axum::http::{header, StatusCode};
@@ -13,24 +12,6 @@ use axum::Json;
 use serde::Deserialize;
 use serde_json::json;
 
-/// The set `id` if `user` may see it: its owner and administrators always;
-/// everyone once it is published and not hidden. Otherwise 404, so
-/// private sets do not reveal that they exist.
-pub async fn visible_set(state: &AppState, id: &str, user: Option<&User>) -> Result<ResultSet, ApiError> {
-    if uuid::Uuid::parse_str(id).is_err() {
-        return Err(ApiError::bad_request("invalid_uuid", format!("{id:?} is not a result UUID")));
-    }
-    let not_found =
-        || ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no result set {id} that you can see"));
-    let set = results::get(&state.pool, id).await?.ok_or_else(not_found)?;
-    let owner = user.is_some_and(|u| set.user_id.as_deref() == Some(u.id.as_str()) || u.is_admin);
-    if owner || set.is_public() {
-        Ok(set)
-    } else {
-        Err(not_found())
-    }
-}
-
 /// `GET /api/v1/results/{id}`: a result set with its runs and the board it sits on.
 pub async fn show(
     State(state): State<AppState>,
@@ -38,7 +19,7 @@ pub async fn show(
     Path(id): Path<String>,
     Query(query): Query<BoardQuery>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
-    let set = visible_set(&state, &id, user.as_ref()).await?;
+    let set = results::visible(&state.pool, &id, user.as_ref()).await?;
     let runs = results::runs(&state.pool, results::Selection::One(&set.id)).await?;
     let board = leaderboard::build(&state.pool, &state.boards, &query, Some(&set)).await?;
     Ok(Json(json!({ "result": set, "runs": runs, "board": board })))
@@ -129,7 +110,7 @@ pub async fn file(
     MaybeUser(user): MaybeUser,
     Path((id, name)): Path<(String, String)>,
 ) -> Result<Response, ApiError> {
-    let set = visible_set(&state, &id, user.as_ref()).await?;
+    let set = results::visible(&state.pool, &id, user.as_ref()).await?;
     results::check_file_name(&name)?;
     let path = results::files_dir(&state.config.data_dir, &set.id).join(&name);
     let bytes = tokio::fs::read(&path)

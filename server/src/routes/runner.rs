@@ -1,57 +1,32 @@
 //! The runner API: registration, claiming jobs (long poll), and reporting
 //! on one job with its job token (heartbeat, log, results, files, end).
 //!
-//! ```text
-//! POST /api/v1/runners              {registration_token, name, machine} → {id, token}
-//! POST /api/v1/runners/jobs         runner token; {wait_seconds} → 200 job | 204 none
-//! POST /api/v1/runners/status       runner token; {preparing: text | null} → 204
-//! POST /api/v1/jobs/{id}/heartbeat  job token → {lease_seconds}
-//! POST /api/v1/jobs/{id}/log        job token; text body (appended)
-//! PUT  /api/v1/jobs/{id}/results    job token; results JSON (see `results`)
-//! PUT  /api/v1/jobs/{id}/files/{*}  job token; a file of the result set (PNG)
-//! POST /api/v1/jobs/{id}/finish     job token; {state, reason, message}
-//! ```
+//! The messages are `fbksd_exchange::runner_api`'s, which the runner
+//! serialises too; that module lists the routes.
 //! A job token that is no longer valid (job cancelled, requeued after a
 //! lost lease, finished) gets 410: the runner must stop the job.
 
 use super::{JobCaller, RunnerCaller};
-use crate::error::ApiError;
+use crate::routes::ApiError;
 use crate::AppState;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use serde::Deserialize;
-use serde_json::json;
+use fbksd_exchange::runner_api::{
+    Claim, ClaimRequest, ClaimedJob, Finished, Lease, Outcome, Registration, RunnerCredentials, StatusReport,
+};
 use std::time::{Duration, Instant};
-
-/// A runner's registration.
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Registration {
-    registration_token: String,
-    name: String,
-    #[serde(default)]
-    machine: serde_json::Value,
-}
 
 /// `POST /api/v1/runners`.
 pub async fn register(
     State(state): State<AppState>,
     Json(body): Json<Registration>,
-) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
+) -> Result<(StatusCode, Json<RunnerCredentials>), ApiError> {
     let (id, token) =
         crate::runners::register(&state.pool, &body.registration_token, &body.name, &body.machine).await?;
-    Ok((StatusCode::CREATED, Json(json!({ "id": id, "token": token }))))
-}
-
-/// What a runner is doing before it takes jobs.
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct StatusReport {
-    /// What it prepares, for people (e.g. "reference 3 of 8: experimental/sphere, 4096 spp"); null when ready.
-    preparing: Option<String>,
+    Ok((StatusCode::CREATED, Json(RunnerCredentials { id, token })))
 }
 
 /// `POST /api/v1/runners/status`: a runner says what it prepares (shown on
@@ -64,14 +39,6 @@ pub async fn status(
     let preparing = body.preparing.map(|p| p.chars().take(300).collect::<String>());
     crate::runners::set_status(&state.pool, &runner_id, preparing.as_deref()).await?;
     Ok(StatusCode::NO_CONTENT)
-}
-
-/// How long a claim may wait.
-#[derive(Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub struct ClaimRequest {
-    #[serde(default)]
-    wait_seconds: u64,
 }
 
 /// `POST /api/v1/runners/jobs`: the next job, waiting up to `wait_seconds`
@@ -88,15 +55,21 @@ pub async fn claim(
         // Expired leases are queued again by the server's sweeper (every second).
         let notified = state.job_queued.notified();
         if let Some(claimed) = crate::jobs::claim(&state.pool, state.postgres, &runner_id, lease_ms).await? {
-            let job = &claimed.job;
-            return Ok(Json(json!({
-                "job": job,
-                "token": claimed.token,
-                "repository": state.clone_url(&job.project),
-                "commit": job.commit_sha,
-                "lease_seconds": state.config.lease_seconds,
-                "results_url": state.public_url,
-            }))
+            let job = claimed.job;
+            return Ok(Json(Claim {
+                repository: state.clone_url(&job.project),
+                commit: job.commit_sha,
+                job: ClaimedJob {
+                    id: job.id,
+                    project: job.project,
+                    kind: job.kind,
+                    attempts: job.attempts,
+                    season: job.season,
+                },
+                token: claimed.token,
+                lease_seconds: state.config.lease_seconds,
+                results_url: state.public_url.clone(),
+            })
             .into_response());
         }
         let now = Instant::now();
@@ -109,9 +82,9 @@ pub async fn claim(
 }
 
 /// `POST /api/v1/jobs/{id}/heartbeat`: extends the lease.
-pub async fn heartbeat(State(state): State<AppState>, job: JobCaller) -> Result<Json<serde_json::Value>, ApiError> {
+pub async fn heartbeat(State(state): State<AppState>, job: JobCaller) -> Result<Json<Lease>, ApiError> {
     crate::jobs::heartbeat(&state.pool, &job.job_id, state.config.lease_seconds as i64 * 1000).await?;
-    Ok(Json(json!({ "lease_seconds": state.config.lease_seconds })))
+    Ok(Json(Lease { lease_seconds: state.config.lease_seconds }))
 }
 
 /// `POST /api/v1/jobs/{id}/log`: appends text to the job's log.
@@ -142,14 +115,7 @@ async fn read_upload(state: &AppState, body: axum::body::Body) -> Result<Bytes, 
 
 /// Counts `bytes` against the job's upload budget, or refuses them.
 async fn charge_upload(state: &AppState, job_id: &str, bytes: usize) -> Result<(), ApiError> {
-    let done =
-        sqlx::query("UPDATE jobs SET upload_bytes = upload_bytes + $1 WHERE id = $2 AND upload_bytes + $1 <= $3")
-            .bind(bytes as i64)
-            .bind(job_id)
-            .bind(state.config.max_upload_bytes as i64)
-            .execute(&state.pool)
-            .await?;
-    if done.rows_affected() == 0 {
+    if !crate::jobs::charge_upload(&state.pool, job_id, bytes, state.config.max_upload_bytes).await? {
         return Err(ApiError::new(
             StatusCode::PAYLOAD_TOO_LARGE,
             "upload_too_large",
@@ -190,11 +156,7 @@ pub async fn put_results(
         serde_json::from_slice(&body).map_err(|e| ApiError::bad_request("invalid_output", format!("results: {e}")))?;
     let staging = crate::results::staging_dir(&state.config.data_dir, &job.job_id);
     upload.check(&uploaded_files(&staging)).map_err(|e| ApiError::bad_request("invalid_output", e))?;
-    sqlx::query("UPDATE jobs SET staged_results = $1 WHERE id = $2")
-        .bind(String::from_utf8_lossy(&body).into_owned())
-        .bind(&job.job_id)
-        .execute(&state.pool)
-        .await?;
+    crate::jobs::stage_results(&state.pool, &job.job_id, &String::from_utf8_lossy(&body)).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -219,9 +181,9 @@ fn uploaded_files(dir: &std::path::Path) -> std::collections::BTreeSet<String> {
 pub async fn finish(
     State(state): State<AppState>,
     job: JobCaller,
-    Json(outcome): Json<crate::pipelines::Outcome>,
-) -> Result<Json<serde_json::Value>, ApiError> {
-    let result = crate::pipelines::finish(&state, &job.job_id, job.attempt, outcome).await?;
-    let url = result.as_ref().map(|id| format!("{}/results/{id}", state.public_url));
-    Ok(Json(json!({ "result_id": result, "results_url": url })))
+    Json(outcome): Json<Outcome>,
+) -> Result<Json<Finished>, ApiError> {
+    let result_id = crate::pipelines::finish(&state, &job.job_id, job.attempt, outcome).await?;
+    let results_url = result_id.as_ref().map(|id| format!("{}/results/{id}", state.public_url));
+    Ok(Json(Finished { result_id, results_url }))
 }

@@ -154,26 +154,13 @@ impl TestServer {
 
     /// Logs `email` in with `browser` and creates an access token.
     pub async fn log_in(&self, email: &str, password: &str, browser: reqwest::Client) -> TestUser {
-        let session: serde_json::Value = browser
-            .post(format!("{}/api/v1/sessions", self.url))
-            .json(&serde_json::json!({ "email": email, "password": password }))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let login = browser.post(format!("{}/api/v1/sessions", self.url));
+        let (_, session) =
+            json_of(login.json(&serde_json::json!({ "email": email, "password": password })).send().await.unwrap())
+                .await;
         let csrf = session["csrf_token"].as_str().expect("logged in").to_string();
-        let token: serde_json::Value = browser
-            .post(format!("{}/api/v1/tokens", self.url))
-            .header("X-CSRF-Token", &csrf)
-            .json(&serde_json::json!({ "name": "tests" }))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let create = browser.post(format!("{}/api/v1/tokens", self.url)).header("X-CSRF-Token", &csrf);
+        let (_, token) = json_of(create.json(&serde_json::json!({ "name": "tests" })).send().await.unwrap()).await;
         TestUser { email: email.into(), browser, csrf, token: token["token"].as_str().unwrap().to_string() }
     }
 

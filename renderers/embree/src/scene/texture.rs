@@ -169,7 +169,7 @@ pub fn read_image(path: &Path, encoding: Encoding) -> Result<ImageData, String> 
     match ext.as_str() {
         "exr" => {
             let (width, height, rgb) =
-                fbksd_manager::results::read_exr(path).map_err(|e| format!("{}: {e}", path.display()))?;
+                fbksd_iqa::image::read_exr(path).map_err(|e| format!("{}: {e}", path.display()))?;
             let pixels = rgb.chunks_exact(3).map(|c| vec3(c[0], c[1], c[2])).collect();
             Ok(ImageData { width: width as usize, height: height as usize, pixels })
         }

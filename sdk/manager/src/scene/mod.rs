@@ -7,23 +7,21 @@
 //! clock — arrives on one channel, so the state machine in [`Session`] is
 //! single-threaded and every end of a run is decided in one place.
 
+mod conn;
 mod session;
 
 use crate::process::{log_tail, report_to, ExitInfo, LaunchSpec, Launcher, LocalLauncher, ProcessRole, Running};
-use crate::record::{RunStatus, Times};
-use fbksd_core::protocol::{
-    read_frame, write_frame, ErrorKind, FromRenderer, FromTechnique, Hello, Role, ToRenderer, ToTechnique,
-    PROTOCOL_NAME, PROTOCOL_VERSION,
-};
+use conn::{accept_loop, refuse, spawn_reader, Event, Inbox, RendererConn};
+use fbksd_core::protocol::{write_frame, FromRenderer, Hello, Role, ToRenderer, PROTOCOL_VERSION};
 use fbksd_core::scene_info::keys;
 use fbksd_core::{rendezvous, SceneInfo};
+use fbksd_exchange::record::{RunStatus, Times};
 use session::Session;
 use std::collections::VecDeque;
-use std::io::BufReader;
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::mpsc::{channel, Sender};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -94,61 +92,45 @@ pub struct RunOutcome {
     pub peak_memory_bytes: u64,
 }
 
-/// The runner's event channel, with events set aside while waiting for a
-/// particular one (so none is ever dropped).
-struct Inbox {
-    rx: Receiver<Event>,
-    deferred: VecDeque<Event>,
-}
-
-impl Inbox {
-    /// The next event, or `None` when `deadline` passes first.
-    fn next(&mut self, deadline: Option<Instant>) -> Option<Event> {
-        if let Some(e) = self.deferred.pop_front() {
-            return Some(e);
-        }
-        match deadline {
-            Some(d) => self.rx.recv_timeout(d.saturating_duration_since(Instant::now())).ok(),
-            None => self.rx.recv().ok(),
-        }
-    }
-
-    /// The first event `pick` accepts within `within`; others are kept for later.
-    fn wait_for(&mut self, within: Duration, pick: impl Fn(&Event) -> bool) -> Option<Event> {
-        if let Some(i) = self.deferred.iter().position(&pick) {
-            return self.deferred.remove(i);
-        }
-        let deadline = Instant::now() + within;
-        loop {
-            match self.rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-                Ok(e) if pick(&e) => return Some(e),
-                Ok(e) => self.deferred.push_back(e),
-                Err(_) => return None,
-            }
+impl Default for RunOutcome {
+    /// Nothing measured yet (and `ok` until something goes wrong).
+    fn default() -> Self {
+        RunOutcome {
+            status: RunStatus::Ok,
+            message: String::new(),
+            image: None,
+            width: 0,
+            height: 0,
+            samples_budget: 0,
+            used_samples: 0,
+            requests: 0,
+            times: Times::default(),
+            peak_memory_bytes: 0,
         }
     }
 }
 
-pub(crate) enum Event {
-    Connected(UnixStream, Hello),
-    Technique(u64, Result<Option<FromTechnique>, String>),
-    Renderer(u64, Result<Option<FromRenderer>, String>),
-    TechniqueExited(u64, ExitInfo),
-    RendererExited(u64, ExitInfo),
-}
-
-pub(crate) struct RendererConn {
-    process: Box<dyn Running>,
-    writer: UnixStream,
-    generation: u64,
-    tile_size: u32,
-    scene_info: SceneInfo,
-}
-
-impl RendererConn {
-    pub(crate) fn send(&mut self, message: &ToRenderer) {
-        // A failed write surfaces as the reader's end of stream or the exit event.
-        let _ = write_frame(&mut self.writer, message);
+impl RunOutcome {
+    /// The outcome of a finished session: its end, honest times, memory and samples.
+    fn measured(mut self, s: &mut Session, started: Instant, status: RunStatus, message: String) -> RunOutcome {
+        let end = s.result_at.unwrap_or_else(Instant::now);
+        let wall = end - started;
+        let waiting = s.waiting + s.waiting_since.map_or(Duration::ZERO, |w| end.saturating_duration_since(w));
+        self.times = Times {
+            technique_ms: ms(wall.saturating_sub(waiting)),
+            waiting_ms: ms(waiting),
+            render_ms: ms(s.render_time),
+            wall_ms: ms(wall),
+            startup_ms: s.hello_at.map_or(0.0, |h| ms(h - started)),
+            cpu_ms: s.exit.as_ref().map_or(0.0, |e| ms(e.cpu_time)),
+        };
+        self.peak_memory_bytes = s.exit.as_ref().map_or(0, |e| e.peak_rss);
+        self.used_samples = s.used + s.active.as_ref().map_or(0, |a| a.delivered);
+        self.requests = s.requests;
+        self.image = s.image.take();
+        self.status = status;
+        self.message = message;
+        self
     }
 }
 
@@ -335,18 +317,7 @@ impl SceneRunner {
         technique_log: &Path,
         progress: &mut dyn FnMut(u64, u64),
     ) -> RunOutcome {
-        let mut outcome = RunOutcome {
-            status: RunStatus::Ok,
-            message: String::new(),
-            image: None,
-            width: 0,
-            height: 0,
-            samples_budget: 0,
-            used_samples: 0,
-            requests: 0,
-            times: Times::default(),
-            peak_memory_bytes: 0,
-        };
+        let mut outcome = RunOutcome::default();
         if let Err(e) = self.ensure_renderer() {
             outcome.status = RunStatus::RendererFailed;
             outcome.message = e;
@@ -452,12 +423,18 @@ impl SceneRunner {
         let deadline = self.limits.time_limit.map(|l| started + l);
         let (status, message) = self.event_loop(&mut s, &result_buffer, deadline, progress);
 
-        // Clean up: the technique, then the renderer (restarted next time if
-        // the session left it mid-request), then the shared files.
-        if let Some(p) = &technique {
+        self.end_session(&mut s, technique.as_deref(), &result_path);
+        outcome.measured(&mut s, started, status, message)
+    }
+
+    /// Cleans up after a session: the technique, then the renderer
+    /// (restarted next time if the session left it mid-request), then the
+    /// shared files.
+    fn end_session(&mut self, s: &mut Session, technique: Option<&dyn Running>, result_path: &Path) {
+        if let Some(p) = technique {
             p.kill();
             if s.exit.is_none() {
-                s.exit = self.wait_technique_exit(technique_generation, Duration::from_secs(2));
+                s.exit = self.wait_technique_exit(s.generation, Duration::from_secs(2));
             }
         }
         // A renderer left inside a request or a layout change is restarted:
@@ -467,29 +444,10 @@ impl SceneRunner {
         } else if let Some(r) = self.renderer.as_mut() {
             r.send(&ToRenderer::EndSession);
         }
-        let _ = std::fs::remove_file(&result_path);
-        if let Some(ring) = s.ring {
+        let _ = std::fs::remove_file(result_path);
+        if let Some(ring) = s.ring.take() {
             let _ = std::fs::remove_file(self.dir.path().join(ring.file_name()));
         }
-
-        let end = s.result_at.unwrap_or_else(Instant::now);
-        let wall = end - started;
-        let waiting = s.waiting + s.waiting_since.map_or(Duration::ZERO, |w| end.saturating_duration_since(w));
-        outcome.times = Times {
-            technique_ms: ms(wall.saturating_sub(waiting)),
-            waiting_ms: ms(waiting),
-            render_ms: ms(s.render_time),
-            wall_ms: ms(wall),
-            startup_ms: s.hello_at.map_or(0.0, |h| ms(h - started)),
-            cpu_ms: s.exit.as_ref().map_or(0.0, |e| ms(e.cpu_time)),
-        };
-        outcome.peak_memory_bytes = s.exit.as_ref().map_or(0, |e| e.peak_rss);
-        outcome.used_samples = s.used + s.active.as_ref().map_or(0, |a| a.delivered);
-        outcome.requests = s.requests;
-        outcome.image = s.image.take();
-        outcome.status = status;
-        outcome.message = message;
-        outcome
     }
 
     fn wait_technique_exit(&mut self, generation: u64, within: Duration) -> Option<ExitInfo> {
@@ -661,57 +619,4 @@ fn launch_failed(mut outcome: RunOutcome, message: String, result_path: &Path) -
 
 fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
-}
-
-fn accept_loop(listener: UnixListener, tx: Sender<Event>) {
-    for stream in listener.incoming() {
-        let Ok(mut stream) = stream else { continue };
-        let tx = tx.clone();
-        // Read the hello off the acceptor thread so a silent peer blocks no one.
-        std::thread::spawn(move || {
-            let _ = stream.set_read_timeout(Some(Duration::from_secs(10)));
-            let hello = read_frame::<_, Hello>(&mut stream);
-            let _ = stream.set_read_timeout(None);
-            match hello {
-                Ok(Some(h)) if h.protocol == PROTOCOL_NAME && h.version == PROTOCOL_VERSION => {
-                    let _ = tx.send(Event::Connected(stream, h));
-                }
-                Ok(Some(h)) => refuse_kind(
-                    &mut stream,
-                    ErrorKind::VersionMismatch,
-                    &format!(
-                        "this manager speaks {PROTOCOL_NAME} protocol version {PROTOCOL_VERSION}; the peer speaks {:?} version {}: rebuild it against this SDK",
-                        h.protocol, h.version
-                    ),
-                ),
-                Ok(None) => {}
-                Err(e) => refuse_kind(&mut stream, ErrorKind::Protocol, &format!("expected a hello frame: {e}")),
-            }
-        });
-    }
-}
-
-pub(crate) fn refuse(stream: &mut UnixStream, why: &str) {
-    refuse_kind(stream, ErrorKind::Protocol, why);
-}
-
-pub(crate) fn refuse_kind(stream: &mut UnixStream, kind: ErrorKind, why: &str) {
-    let _ = write_frame(stream, &ToTechnique::Error { kind, message: why.to_string() });
-}
-
-pub(crate) fn spawn_reader<T, F>(stream: UnixStream, tx: Sender<Event>, wrap: F)
-where
-    T: serde::de::DeserializeOwned + Send + 'static,
-    F: Fn(Result<Option<T>, String>) -> Event + Send + 'static,
-{
-    std::thread::spawn(move || {
-        let mut reader = BufReader::new(stream);
-        loop {
-            let message = read_frame::<_, T>(&mut reader).map_err(|e| e.to_string());
-            let stop = !matches!(message, Ok(Some(_)));
-            if tx.send(wrap(message)).is_err() || stop {
-                return;
-            }
-        }
-    });
 }

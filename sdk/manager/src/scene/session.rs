@@ -3,15 +3,15 @@
 //! one message at a time from the technique or the renderer (the runner's
 //! event loop in the parent module feeds it) and says when the run ends.
 
-use super::{refuse, spawn_reader, Event, RendererConn};
+use super::conn::{refuse, spawn_reader, Event, RendererConn};
 use crate::process::ExitInfo;
-use crate::record::RunStatus;
 use fbksd_core::layout::CompiledLayout;
 use fbksd_core::protocol::{
     write_frame, Amount, ErrorKind, FromRenderer, FromTechnique, Hello, Role, ToRenderer, ToTechnique, PROTOCOL_VERSION,
 };
 use fbksd_core::shm::{Ring, RingSpec};
 use fbksd_core::{SceneInfo, Tile};
+use fbksd_exchange::record::RunStatus;
 use std::collections::VecDeque;
 use std::os::unix::net::UnixStream;
 use std::path::PathBuf;

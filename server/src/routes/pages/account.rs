@@ -65,7 +65,10 @@ pub async fn login(
     check_form_cookie(&headers, &form.csrf_token)?;
     let user = match accounts::authenticate(&state.pool, &form.email, &form.password).await {
         Ok(user) => user,
-        Err(e) => return Ok(credentials_page(false, &form.email, &e.message, e.status)),
+        Err(e) => {
+            let e = ApiError::from(e);
+            return Ok(credentials_page(false, &form.email, &e.message, e.status));
+        }
     };
     let session = accounts::open_session(&state.pool, &user.id, state.config.session_hours).await?;
     let cookie = crate::routes::session_cookie(&state, &session.token);
@@ -82,9 +85,13 @@ pub async fn register(
     let checked = (Email::parse(&form.email), Password::parse(&form.password));
     let (email, password) = match checked {
         (Ok(e), Ok(p)) => (e, p),
-        (Err(e), _) | (_, Err(e)) => return Ok(credentials_page(true, &form.email, &e.message, e.status)),
+        (Err(e), _) | (_, Err(e)) => {
+            let e = ApiError::from(e);
+            return Ok(credentials_page(true, &form.email, &e.message, e.status));
+        }
     };
-    if let Err(e) = crate::routes::accounts::create_and_mail(&state, &email, &password).await {
+    if let Err(e) = crate::accounts::register(&state, &email, &password).await {
+        let e = ApiError::from(e);
         return Ok(credentials_page(true, &form.email, &e.message, e.status));
     }
     let nav = Nav { user: None, csrf: String::new() };
@@ -92,13 +99,7 @@ pub async fn register(
 }
 
 /// `POST /logout`.
-pub async fn logout(
-    State(state): State<AppState>,
-    visitor: Visitor,
-    headers: axum::http::HeaderMap,
-    Form(form): Form<CsrfForm>,
-) -> PageResult {
-    visitor.check(&form.csrf_token)?;
+pub async fn logout(State(state): State<AppState>, headers: axum::http::HeaderMap, _: Button) -> PageResult {
     if let Some(token) = cookie(&headers, SESSION_COOKIE) {
         accounts::close_session(&state.pool, token).await?;
     }
@@ -159,11 +160,9 @@ pub async fn create_token(State(state): State<AppState>, visitor: Visitor, Form(
 /// `POST /settings/tokens/{id}/revoke`.
 pub async fn revoke_token(
     State(state): State<AppState>,
-    visitor: Visitor,
     Path(id): Path<String>,
-    Form(form): Form<CsrfForm>,
+    Button { user, .. }: Button,
 ) -> PageResult {
-    let user = visitor.check(&form.csrf_token)?;
     accounts::revoke_access_token(&state.pool, &user.id, &id).await?;
     Ok(Redirect::to("/settings").into_response())
 }

@@ -50,12 +50,10 @@ pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) ->
 /// `POST /admin/jobs/{id}/requeue`.
 pub async fn admin_requeue(
     State(state): State<AppState>,
-    visitor: Visitor,
     Path(id): Path<String>,
-    Form(form): Form<CsrfForm>,
+    Button { user, nav }: Button,
 ) -> PageResult {
-    let user = visitor.check(&form.csrf_token)?;
-    admin_of(&visitor.0)?;
+    admin_of(&nav)?;
     crate::jobs::requeue(&state.pool, &id, &user.email).await?;
     state.job_queued.notify_waiters();
     Ok(Redirect::to("/admin").into_response())
@@ -95,11 +93,7 @@ pub struct SeasonForm {
 pub async fn admin_season(State(state): State<AppState>, visitor: Visitor, Form(form): Form<SeasonForm>) -> PageResult {
     visitor.check(&form.csrf_token)?;
     admin_of(&visitor.0)?;
-    let started = crate::routes::admin::start_season(&state, &form.note).await?;
-    let text = format!(
-        "Season {} started; {} techniques queued again.",
-        started["season"],
-        started["queued"].as_array().map_or(0, Vec::len)
-    );
+    let started = crate::admin::start_season(&state, &form.note).await?;
+    let text = format!("Season {} started; {} techniques queued again.", started.season, started.queued.len());
     Ok(message(visitor.0, "New season", text))
 }

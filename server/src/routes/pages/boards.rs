@@ -56,7 +56,7 @@ struct BoardPage {
     result: Option<ResultView>,
     seasons: Vec<(i64, String)>,
     season: i64,
-    metrics: Vec<fbksd_iqa::MetricInfo>,
+    metrics: Vec<fbksd_exchange::MetricInfo>,
     sort: String,
     tags: Vec<String>,
     tag: String,
@@ -171,25 +171,23 @@ pub async fn result_page(
     Path(id): Path<String>,
     Query(query): Query<BoardQuery>,
 ) -> PageResult {
-    let set = crate::routes::results::visible_set(&state, &id, nav.user.as_ref()).await?;
+    let set = crate::results::visible(&state.pool, &id, nav.user.as_ref()).await?;
     board_page(&state, nav, query, Some(set), false).await
 }
 
 /// `POST /results/{id}/{action}`: publish, unpublish or discard (owner only).
 pub async fn result_action(
     State(state): State<AppState>,
-    visitor: Visitor,
     Path((id, action)): Path<(String, String)>,
-    Form(form): Form<CsrfForm>,
+    Button { user, nav }: Button,
 ) -> PageResult {
-    let user = visitor.check(&form.csrf_token)?;
     let set = crate::results::owned(&state.pool, &id, &user.id).await?;
     match action.as_str() {
         "publish" => crate::results::publish(&state.pool, &set).await?,
         "unpublish" => crate::results::unpublish(&state.pool, &set.id).await?,
         "discard" => {
             crate::results::discard(&state.pool, &state.config.data_dir, &set.id).await?;
-            return Ok(message(visitor.0, "Discarded", format!("Result set {id} is deleted.")));
+            return Ok(message(nav, "Discarded", format!("Result set {id} is deleted.")));
         }
         other => return Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no action {other:?}")).into()),
     }

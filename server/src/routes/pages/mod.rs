@@ -24,13 +24,13 @@ pub use techniques::*;
 
 use super::{cookie, SESSION_COOKIE};
 use crate::accounts::{self, Email, Password, User};
-use crate::error::ApiError;
 use crate::leaderboard::{self, BoardQuery};
 use crate::pipelines::{Request, Source};
 use crate::projects;
+use crate::routes::ApiError;
 use crate::AppState;
 use askama::Template;
-use axum::extract::{FromRequestParts, Path, Query, State};
+use axum::extract::{FromRequest, FromRequestParts, Path, Query, State};
 use axum::http::request::Parts;
 use axum::http::{header, StatusCode};
 use axum::response::{Html, IntoResponse, Redirect, Response};
@@ -85,6 +85,12 @@ pub struct PageError(ApiError);
 impl From<ApiError> for PageError {
     fn from(e: ApiError) -> Self {
         PageError(e)
+    }
+}
+
+impl From<crate::error::ServiceError> for PageError {
+    fn from(e: crate::error::ServiceError) -> Self {
+        PageError(e.into())
     }
 }
 
@@ -263,6 +269,28 @@ pub struct CsrfForm {
     csrf_token: String,
 }
 
+/// A button's post: a logged-in visitor whose form (nothing but the CSRF
+/// token) checked out. Refused like [`Visitor::check`] otherwise.
+pub struct Button {
+    user: User,
+    nav: Nav,
+}
+
+impl FromRequest<AppState> for Button {
+    type Rejection = PageError;
+
+    async fn from_request(request: axum::extract::Request, state: &AppState) -> Result<Self, PageError> {
+        let (mut parts, body) = request.into_parts();
+        let visitor = Visitor::from_request_parts(&mut parts, state).await?;
+        let request = axum::extract::Request::from_parts(parts, body);
+        let Form(form) = Form::<CsrfForm>::from_request(request, state)
+            .await
+            .map_err(|e| ApiError::new(e.status(), "invalid_form", e.body_text()))?;
+        let user = visitor.check(&form.csrf_token)?.clone();
+        Ok(Button { user, nav: visitor.0 })
+    }
+}
+
 /// A job as the pages' tables show it.
 struct JobRow {
     id: String,
@@ -270,7 +298,7 @@ struct JobRow {
     project: String,
     kind: &'static str,
     commit: String,
-    state: String,
+    state: &'static str,
     reason: String,
     created: String,
 }
@@ -282,7 +310,7 @@ fn job_row(job: &crate::jobs::Job) -> JobRow {
         project: job.project.clone(),
         kind: job.kind.as_str(),
         commit: job.commit_sha[..12.min(job.commit_sha.len())].to_string(),
-        state: job.state.clone(),
+        state: job.state.as_str(),
         reason: job.failure_reason.clone().unwrap_or_default(),
         created: when(job.created_at),
     }

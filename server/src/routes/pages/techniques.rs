@@ -40,7 +40,7 @@ pub async fn create_project(
     Form(form): Form<ProjectForm>,
 ) -> PageResult {
     let user = visitor.check(&form.csrf_token)?;
-    let project = crate::routes::projects::create_with_repository(&state, user, &form.name, &form.visibility).await?;
+    let project = crate::projects::create(&state, user, &form.name, &form.visibility).await?;
     Ok(Redirect::to(&format!("/projects/{}", project.name)).into_response())
 }
 
@@ -101,7 +101,7 @@ pub async fn project_page(
             // The same answer as for no project at all: a private name stays private.
             return Err(projects::not_found(&name).into());
         };
-        serde_json::from_value::<fbksd_manager::technique::TechniqueInfo>(set.info.clone()).ok()
+        serde_json::from_value::<fbksd_exchange::technique::TechniqueInfo>(set.info.clone()).ok()
     } else {
         match state.git.resolve(&project.id, "main").await {
             Some(commit) => crate::pipelines::sanity_check(&state, &project, &commit).await.ok(),
@@ -147,17 +147,15 @@ pub async fn project_page(
 /// `POST /projects/{name}/run`: FBKSD_RUN at the head of `main`.
 pub async fn run_project(
     State(state): State<AppState>,
-    visitor: Visitor,
     Path(name): Path<String>,
-    Form(form): Form<CsrfForm>,
+    Button { user, .. }: Button,
 ) -> PageResult {
-    let user = visitor.check(&form.csrf_token)?;
-    let project = projects::writable(&state.pool, &name, user).await?;
+    let project = projects::writable(&state.pool, &name, &user).await?;
     let commit =
         state.git.resolve(&project.id, "main").await.ok_or_else(|| {
             ApiError::bad_request("unknown_ref", format!("{name} has no commit on main yet: push first"))
         })?;
-    let started = crate::pipelines::start(&state, &project, user, &commit, "main", Request::Run, Source::Api).await?;
+    let started = crate::pipelines::start(&state, &project, &user, &commit, "main", Request::Run, Source::Api).await?;
     Ok(Redirect::to(&format!("/jobs/{}", started.job.id)).into_response())
 }
 
@@ -176,9 +174,9 @@ struct JobPage {
 
 /// `GET /jobs/{id}`: a job and its log, streamed live while it runs.
 pub async fn job_page(State(state): State<AppState>, Visitor(nav): Visitor, Path(id): Path<String>) -> PageResult {
-    let (job, project) = crate::routes::projects::readable_job(&state, &id, nav.user.as_ref()).await?;
+    let (job, project) = crate::jobs::readable(&state.pool, &id, nav.user.as_ref()).await?;
     let log: String = crate::jobs::log_since(&state.pool, &job.id, 0).await?.into_iter().map(|(_, t)| t).collect();
-    let live = job.state == "queued" || job.state == "running";
+    let live = job.state.is_live();
     let can_cancel = live && nav.user.as_ref().is_some_and(|u| project.writable_by(u) || u.is_admin);
     let page = JobPage {
         job: job_row(&job),
@@ -196,11 +194,9 @@ pub async fn job_page(State(state): State<AppState>, Visitor(nav): Visitor, Path
 /// `POST /jobs/{id}/cancel`.
 pub async fn cancel_job(
     State(state): State<AppState>,
-    visitor: Visitor,
     Path(id): Path<String>,
-    Form(form): Form<CsrfForm>,
+    Button { user, .. }: Button,
 ) -> PageResult {
-    let user = visitor.check(&form.csrf_token)?;
-    crate::routes::projects::cancel_as(&state, &id, user).await?;
+    crate::jobs::cancel_as(&state.pool, &id, &user).await?;
     Ok(Redirect::to(&format!("/jobs/{id}")).into_response())
 }

@@ -5,10 +5,13 @@
 //! <results>/<technique>/<scene>/<spp>_0.exr         result image (32-bit float, scanline)
 //! <results>/<technique>/<scene>/<spp>_0_log.json    the run's RunRecord
 //! <results>/<technique>/<scene>/<spp>_0_technique.log   the technique's stdout and stderr
+//! <results>/<technique>/<scene>/<spp>_0_<METRIC>.json    a metric's value (`fbksd results compute`)
+//! <results>/<technique>/<scene>/<spp>_0_<METRIC>_map.png its error map
 //! <results>/renderer-logs/<scene>.log               the renderer's stdout and stderr
 //! ```
 //!
-//! File names follow the original FBKSD (`<spp>_0.exr`, `<spp>_0_log.json`).
+//! File names follow the original FBKSD (`<spp>_0.exr`, `<spp>_0_log.json`)
+//! and are spelled only here ([`RunFiles`]).
 //! The index is rewritten atomically after every run, so an interrupted
 //! benchmark keeps every finished run.
 
@@ -23,6 +26,53 @@ pub const INDEX_FILE: &str = "index.json";
 pub const INDEX_FORMAT: &str = "fbksd-results";
 /// Version of the index format.
 pub const INDEX_VERSION: u32 = 1;
+
+/// The file names of one run in its `<technique>/<scene>/` directory. The
+/// `_0` is the original's run number: one run per budget.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunFiles {
+    /// The run's budget in samples per pixel.
+    pub spp: u64,
+}
+
+impl RunFiles {
+    /// The result image.
+    pub fn image(self) -> String {
+        format!("{}_0.exr", self.spp)
+    }
+    /// The run's [`RunRecord`].
+    pub fn log(self) -> String {
+        format!("{}_0_log.json", self.spp)
+    }
+    /// The technique's stdout and stderr.
+    pub fn technique_log(self) -> String {
+        format!("{}_0_technique.log", self.spp)
+    }
+    /// A metric's value record.
+    pub fn metric_value(self, metric: &str) -> String {
+        format!("{}_0_{metric}.json", self.spp)
+    }
+    /// A metric's error map.
+    pub fn error_map(self, metric: &str) -> String {
+        format!("{}_0_{metric}_map.png", self.spp)
+    }
+}
+
+/// What a metric is, in the original FBKSD's IQA `info.json` terms; result
+/// uploads carry one per metric their values are in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MetricInfo {
+    /// Short name, e.g. `"MSE"`.
+    pub acronym: String,
+    /// Full name.
+    pub name: String,
+    /// Citation.
+    pub reference: String,
+    /// Whether smaller values are better.
+    pub lower_is_better: bool,
+    /// Whether the metric draws an error map.
+    pub has_error_map: bool,
+}
 
 /// One run in the index.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -134,9 +184,10 @@ impl ResultsDir {
             index.runs.iter().find(|r| (&r.technique, &r.scene, r.spp) == (&entry.technique, &entry.scene, entry.spp))
         {
             let dir = self.root.join(&old.technique).join(&old.scene);
+            let files = RunFiles { spp: old.spp };
             for metric in old.metrics.keys() {
-                let _ = std::fs::remove_file(dir.join(format!("{}_0_{metric}.json", old.spp)));
-                let _ = std::fs::remove_file(dir.join(format!("{}_0_{metric}_map.png", old.spp)));
+                let _ = std::fs::remove_file(dir.join(files.metric_value(metric)));
+                let _ = std::fs::remove_file(dir.join(files.error_map(metric)));
             }
         }
         index.runs.retain(|r| (&r.technique, &r.scene, r.spp) != (&entry.technique, &entry.scene, entry.spp));
@@ -167,8 +218,6 @@ pub fn path_safe_name(name: &str) -> String {
         t => t.to_string(),
     }
 }
-
-pub use fbksd_iqa::image::{read_exr, srgb, write_exr, write_png_preview};
 
 #[cfg(test)]
 mod tests {

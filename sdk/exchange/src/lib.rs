@@ -1,0 +1,26 @@
+//! What FBKSD's programs exchange, in one place so both ends of every
+//! exchange serialise the same types.
+//!
+//! The manager writes results directories that the CLI, the runner and the
+//! server read; renderers and the runner agree on scene metadata and on when
+//! a cached reference is current; the runner and the server talk over the
+//! runner API. Each of those contracts is a type here, and nothing here runs
+//! a process, touches a database or speaks HTTP:
+//!
+//! - [`record`]: how one run ended and what it measured.
+//! - [`results`]: the results directory's layout, its file names and index.
+//! - [`scenes`]: scene metadata, scene digests and the reference-cache rule.
+//! - [`technique`]: a technique repository's `info.json`.
+//! - [`ranking`]: techniques ranked by mean rank over the index.
+//! - [`runner_api`]: the messages of the runner API, job kinds and states.
+#![deny(missing_docs)]
+
+pub mod ranking;
+pub mod record;
+pub mod results;
+pub mod runner_api;
+pub mod scenes;
+pub mod technique;
+
+pub use record::{FailureReason, RunRecord, RunStatus, Times};
+pub use results::MetricInfo;

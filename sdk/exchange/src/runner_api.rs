@@ -1,0 +1,365 @@
+//! The runner API's messages: what a runner sends the server and what it
+//! gets back. The server (`server/src/routes/runner.rs`) and the runner
+//! (`ci-runner/src/api.rs`) serialise these same types.
+//!
+//! ```text
+//! POST /api/v1/runners              Registration → RunnerCredentials
+//! POST /api/v1/runners/jobs         ClaimRequest → 200 Claim | 204 none
+//! POST /api/v1/runners/status       StatusReport → 204
+//! POST /api/v1/jobs/{id}/heartbeat  → Lease
+//! POST /api/v1/jobs/{id}/log        text body (appended)
+//! PUT  /api/v1/jobs/{id}/files/{*}  a file of the result set
+//! PUT  /api/v1/jobs/{id}/results    Upload
+//! POST /api/v1/jobs/{id}/finish     Outcome → Finished
+//! ```
+
+use crate::record::FailureReason;
+use crate::results::{IndexEntry, MetricInfo};
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+
+/// What a job does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobKind {
+    /// Sanity checks and a sandboxed build (every push).
+    Build,
+    /// Build, then benchmark on the scene pool (`FBKSD_RUN`).
+    Benchmark,
+    /// Publish a result (`FBKSD_PUBLISH`): done by the server at once.
+    Publish,
+}
+
+impl JobKind {
+    /// The name as written in the API and the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobKind::Build => "build",
+            JobKind::Benchmark => "benchmark",
+            JobKind::Publish => "publish",
+        }
+    }
+
+    /// The kind named `text`, if any.
+    pub fn parse(text: &str) -> Option<JobKind> {
+        [JobKind::Build, JobKind::Benchmark, JobKind::Publish].into_iter().find(|k| k.as_str() == text)
+    }
+}
+
+impl fmt::Display for JobKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Where a job is in its life: `queued` → `running` → `succeeded`,
+/// `failed` or `cancelled` (a lost lease puts a running job back in the queue).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JobState {
+    /// Waiting for a runner.
+    Queued,
+    /// A runner holds it.
+    Running,
+    /// Ended well.
+    Succeeded,
+    /// Ended with a [`FailureReason`].
+    Failed,
+    /// Stopped by its author or an administrator.
+    Cancelled,
+}
+
+impl JobState {
+    /// The name as written in the API and the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Succeeded => "succeeded",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+
+    /// The state named `text`, if any.
+    pub fn parse(text: &str) -> Option<JobState> {
+        [JobState::Queued, JobState::Running, JobState::Succeeded, JobState::Failed, JobState::Cancelled]
+            .into_iter()
+            .find(|s| s.as_str() == text)
+    }
+
+    /// Whether the job may still change (queued or running).
+    pub fn is_live(self) -> bool {
+        matches!(self, JobState::Queued | JobState::Running)
+    }
+}
+
+impl fmt::Display for JobState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A runner's registration.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Registration {
+    /// The server's registration token.
+    pub registration_token: String,
+    /// The runner's name, shown to administrators.
+    pub name: String,
+    /// What the machine is (cores, CPU model, …), kept with every result.
+    #[serde(default)]
+    pub machine: serde_json::Value,
+}
+
+/// A runner's identity on the server.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunnerCredentials {
+    /// Runner id.
+    pub id: String,
+    /// Runner token (`fbksdr_…`).
+    pub token: String,
+}
+
+/// What a runner is doing before it takes jobs.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StatusReport {
+    /// What it prepares, for people (e.g. "making reference 3 of 8: …"); `None` when ready.
+    pub preparing: Option<String>,
+}
+
+/// How long a claim may wait on the server for a job.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClaimRequest {
+    /// Seconds (capped by the server).
+    #[serde(default)]
+    pub wait_seconds: u64,
+}
+
+/// A claimed job.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Claim {
+    /// The job.
+    pub job: ClaimedJob,
+    /// The job token (`fbksdj_…`), valid for this attempt only.
+    pub token: String,
+    /// Clone URL of the technique's repository.
+    pub repository: String,
+    /// The commit to build.
+    pub commit: String,
+    /// Lease length: heartbeat well within it.
+    pub lease_seconds: u64,
+    /// The server's public URL.
+    pub results_url: String,
+}
+
+/// The job a runner works on.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ClaimedJob {
+    /// Job id.
+    pub id: String,
+    /// Project (technique) name.
+    pub project: String,
+    /// Build or benchmark.
+    pub kind: JobKind,
+    /// Attempt number (1 for the first claim).
+    pub attempts: i64,
+    /// The leaderboard season it runs for.
+    pub season: i64,
+}
+
+/// A lease, extended by a heartbeat.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Lease {
+    /// Seconds from now.
+    pub lease_seconds: u64,
+}
+
+/// How a runner says a job ended.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Outcome {
+    /// `succeeded` or `failed`.
+    pub state: JobState,
+    /// Why, for failures.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<FailureReason>,
+    /// What happened, for the user.
+    #[serde(default)]
+    pub message: String,
+}
+
+impl Outcome {
+    /// A success.
+    pub fn succeeded(message: impl Into<String>) -> Outcome {
+        Outcome { state: JobState::Succeeded, reason: None, message: message.into() }
+    }
+    /// A failure.
+    pub fn failed(reason: FailureReason, message: impl Into<String>) -> Outcome {
+        Outcome { state: JobState::Failed, reason: Some(reason), message: message.into() }
+    }
+}
+
+/// The server's answer to a job's end.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Finished {
+    /// The result set a benchmark stored.
+    pub result_id: Option<String>,
+    /// Its private page.
+    pub results_url: Option<String>,
+}
+
+/// A scene a result set was measured on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneProvenance {
+    /// Scene name.
+    pub name: String,
+    /// Its tags (filters on the leaderboard).
+    #[serde(default)]
+    pub tags: Vec<String>,
+    /// Hash of the scene files.
+    pub scene_hash: String,
+    /// Hash of the reference image.
+    pub reference_hash: String,
+}
+
+/// What pins a result set: images, commit, runner, machine and limits.
+/// Every field is optional so the server keeps whatever a runner knew.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// Digest of the environment image the technique ran in.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image_digest: Option<String>,
+    /// Every image used, by role (environment name, `renderer`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub images: BTreeMap<String, ImageRef>,
+    /// The technique's commit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commit: Option<String>,
+    /// The technique's version (`info.json`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub version: Option<String>,
+    /// The runner's name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub runner: Option<String>,
+    /// The runner's id.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub runner_id: Option<String>,
+    /// The machine (cores, CPU model, …).
+    #[serde(default, skip_serializing_if = "serde_json::Value::is_null")]
+    pub machine: serde_json::Value,
+    /// The sandbox's limits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limits: Option<SandboxLimits>,
+    /// The runner's version.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fbksd_ci: Option<String>,
+}
+
+/// A container image: tag and content id.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ImageRef {
+    /// Tag, e.g. `fbksd-env-cpp:…`.
+    pub tag: String,
+    /// Image id (`sha256:…`).
+    pub id: String,
+}
+
+/// The limits a technique ran under.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SandboxLimits {
+    /// Wall time of one run, seconds.
+    pub run_timeout_s: f64,
+    /// Memory of one container, MiB.
+    pub memory_mib: u64,
+    /// Processes of one container.
+    pub pids: i64,
+}
+
+/// What a runner uploads for a benchmark job.
+///
+/// Runs are `fbksd results` index entries, so a local results directory and
+/// a server result set speak one format. A run's `image` names a file
+/// uploaded with `PUT /api/v1/jobs/<id>/files/<name>`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Upload {
+    /// One entry per (scene, spp).
+    pub runs: Vec<IndexEntry>,
+    /// The metrics the values are in.
+    pub metrics: Vec<MetricInfo>,
+    /// The scenes.
+    pub scenes: Vec<SceneProvenance>,
+    /// What pins the runs.
+    pub provenance: Provenance,
+}
+
+impl Upload {
+    /// Checks the upload's consistency against the files uploaded before it;
+    /// the message names the first problem.
+    pub fn check(&self, files: &BTreeSet<String>) -> Result<(), String> {
+        if self.runs.is_empty() {
+            return Err("results: \"runs\" is empty".into());
+        }
+        let scenes: BTreeSet<&str> = self.scenes.iter().map(|s| s.name.as_str()).collect();
+        let metrics: BTreeSet<&str> = self.metrics.iter().map(|m| m.acronym.as_str()).collect();
+        let mut seen = BTreeSet::new();
+        for (i, run) in self.runs.iter().enumerate() {
+            let at = format!("results: runs[{i}] ({} at {} spp)", run.scene, run.spp);
+            if !scenes.contains(run.scene.as_str()) {
+                return Err(format!("{at}: scene {:?} is not in \"scenes\"", run.scene));
+            }
+            if !seen.insert((run.scene.as_str(), run.spp)) {
+                return Err(format!("{at}: appears twice"));
+            }
+            for (metric, value) in &run.metrics {
+                if !metrics.contains(metric.as_str()) {
+                    return Err(format!("{at}: metric {metric:?} is not in \"metrics\""));
+                }
+                if !value.is_finite() {
+                    return Err(format!("{at}: {metric} is {value}; only finite values are stored"));
+                }
+            }
+            if !run.technique_ms.is_finite() || !run.render_ms.is_finite() {
+                return Err(format!("{at}: times must be finite"));
+            }
+            if let Some(image) = &run.image {
+                if !files.contains(image) {
+                    return Err(format!("{at}: image {image:?} was not uploaded"));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip() {
+        for s in [JobState::Queued, JobState::Running, JobState::Succeeded, JobState::Failed, JobState::Cancelled] {
+            assert_eq!(JobState::parse(s.as_str()), Some(s));
+            assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
+        }
+        for k in [JobKind::Build, JobKind::Benchmark, JobKind::Publish] {
+            assert_eq!(JobKind::parse(k.as_str()), Some(k));
+            assert_eq!(serde_json::to_value(k).unwrap(), k.as_str());
+        }
+        assert_eq!(JobState::parse("canceled"), None);
+    }
+
+    #[test]
+    fn an_outcome_reads_as_the_server_documents_it() {
+        let o: Outcome = serde_json::from_str(r#"{"state":"failed","reason":"build_failed","message":"x"}"#).unwrap();
+        assert_eq!((o.state, o.reason), (JobState::Failed, Some(FailureReason::BuildFailed)));
+        let bad = serde_json::from_str::<Outcome>(r#"{"state":"done"}"#).unwrap_err().to_string();
+        assert!(bad.contains("unknown variant `done`"), "{bad}");
+    }
+}

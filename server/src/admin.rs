@@ -1,0 +1,85 @@
+//! Administration that spans the service: a new leaderboard season.
+//!
+//! Jobs (requeue, cancel), runners and hidden result sets are administered
+//! through their own modules; starting a season touches seasons, boards and
+//! pipelines at once, so it lives here.
+
+use crate::error::ServiceError;
+use crate::pipelines::{Request, Source};
+use crate::AppState;
+use serde::Serialize;
+
+/// What starting a season did.
+#[derive(Debug, Serialize)]
+pub struct SeasonStarted {
+    /// The new season's number.
+    pub season: i64,
+    /// The re-runs queued.
+    pub queued: Vec<Rerun>,
+    /// The techniques not re-run, and why.
+    pub skipped: Vec<Skipped>,
+}
+
+/// A re-run queued for the new season.
+#[derive(Debug, Serialize)]
+pub struct Rerun {
+    /// The technique.
+    pub technique: String,
+    /// Its benchmark job.
+    pub job: String,
+}
+
+/// A published technique that was not re-run.
+#[derive(Debug, Serialize)]
+pub struct Skipped {
+    /// The technique.
+    pub technique: String,
+    /// Why not.
+    pub why: String,
+}
+
+/// Starts a season (the scene pool changed; the old boards stay readable)
+/// and queues a benchmark of every technique published in the previous
+/// one, at the same commit, published on success.
+pub async fn start_season(state: &AppState, note: &str) -> Result<SeasonStarted, ServiceError> {
+    let note = note.trim();
+    if note.is_empty() {
+        return Err(ServiceError::invalid("missing_note", "say what changed in the scene pool"));
+    }
+    let previous = crate::results::current_season(&state.pool).await?;
+    let published = crate::results::published(&state.pool, previous).await?;
+    sqlx::query("INSERT INTO seasons (number, note, started_at) VALUES ($1, $2, $3)")
+        .bind(previous + 1)
+        .bind(note)
+        .bind(crate::now_ms())
+        .execute(&state.pool)
+        .await?;
+    crate::results::boards_changed(&state.pool).await?;
+    let mut started = SeasonStarted { season: previous + 1, queued: Vec::new(), skipped: Vec::new() };
+    for set in published {
+        let project = crate::projects::by_name(&state.pool, &set.technique).await?;
+        let owner = match &project {
+            Some(p) => crate::accounts::user_by_id(&state.pool, &p.owner_id).await?,
+            None => None,
+        };
+        match (project, owner) {
+            (Some(project), Some(owner)) => {
+                let run = crate::pipelines::start(
+                    state,
+                    &project,
+                    &owner,
+                    &set.commit_sha,
+                    "season",
+                    Request::Run,
+                    Source::Season,
+                )
+                .await?;
+                started.queued.push(Rerun { technique: set.technique, job: run.job.id });
+            }
+            _ => started
+                .skipped
+                .push(Skipped { technique: set.technique, why: "its project or owner was deleted".into() }),
+        }
+    }
+    Ok(started)
+}
