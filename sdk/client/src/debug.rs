@@ -7,11 +7,11 @@
 //! (default `fbksd-debug.exr`) and a one-line summary goes to stderr.
 
 use crate::ClientError;
-use fbksd_iqa::image::write_exr;
+#[cfg(feature = "debug-mode")]
 use fbksd_manager::{Limits, RunOutcome, SceneRunner, TechniqueLaunch};
 use std::path::{Path, PathBuf};
-use std::thread::JoinHandle;
 
+#[cfg_attr(not(feature = "debug-mode"), allow(dead_code))]
 pub(crate) struct RunArgs {
     renderer: Vec<String>,
     spp: u64,
@@ -62,11 +62,15 @@ impl DebugArgs {
     }
 }
 
+/// The manager thread of a debug-mode run. Only techniques built with the
+/// `debug-mode` feature (on by default) link the manager for it.
+#[cfg(feature = "debug-mode")]
 pub(crate) struct DebugManager {
     dir: PathBuf,
-    thread: JoinHandle<()>,
+    thread: std::thread::JoinHandle<()>,
 }
 
+#[cfg(feature = "debug-mode")]
 impl DebugManager {
     pub(crate) fn start(args: RunArgs) -> Result<Self, ClientError> {
         let limits = Limits { time_limit: None, ..Limits::default() };
@@ -89,6 +93,32 @@ impl DebugManager {
     }
 }
 
+/// Without the `debug-mode` feature there is no manager to start.
+#[cfg(not(feature = "debug-mode"))]
+pub(crate) struct DebugManager {
+    never: std::convert::Infallible,
+}
+
+#[cfg(not(feature = "debug-mode"))]
+impl DebugManager {
+    pub(crate) fn start(_: RunArgs) -> Result<Self, ClientError> {
+        Err(ClientError::Debug(
+            "this technique was built without debug mode: build it with fbksd-client's `debug-mode` feature \
+             (on by default), or run it with `fbksd run`"
+                .into(),
+        ))
+    }
+
+    pub(crate) fn dir(&self) -> &Path {
+        match self.never {}
+    }
+
+    pub(crate) fn finish(self) {
+        match self.never {}
+    }
+}
+
+#[cfg(feature = "debug-mode")]
 fn report(outcome: &RunOutcome, output: &Path) {
     let mut line = format!(
         "fbksd debug: {} — {} of {} samples, technique {:.1} ms, render {:.1} ms",
@@ -102,7 +132,7 @@ fn report(outcome: &RunOutcome, output: &Path) {
         line += &format!(": {}", outcome.message);
     }
     if let Some(image) = &outcome.image {
-        match write_exr(output, outcome.width, outcome.height, image) {
+        match fbksd_iqa::image::write_exr(output, outcome.width, outcome.height, image) {
             Ok(()) => line += &format!("; result written to {}", output.display()),
             Err(e) => line += &format!("; cannot write the result: {e}"),
         }

@@ -34,6 +34,8 @@
 //! and `--fbksd-spp N` (optionally `--fbksd-output image.exr`), the client
 //! runs a manager in-process, so a technique can be started directly, e.g.
 //! under a debugger. `--fbksd-version` prints the SDK and protocol versions.
+//! Debug mode is the `debug-mode` feature (on by default): the only reason
+//! the client links the manager.
 #![deny(missing_docs)]
 
 mod debug;
