@@ -214,6 +214,13 @@ impl Runner {
             Ok(url) => {
                 tracing::info!("job {} finished{}", claim.job.id, url.map(|u| format!(": {u}")).unwrap_or_default())
             }
+            // Cancelled (or requeued) while it ran: the server already ended it.
+            Err(crate::api::ApiError::JobGone) => {
+                tracing::info!(
+                    "job {} ended on the server first (cancelled or requeued): {body:?} not recorded",
+                    claim.job.id
+                )
+            }
             Err(e) => tracing::error!("job {}: reporting its end failed: {e}", claim.job.id),
         }
         let left = ctx.sandbox.remove_job_containers(&claim.job.id).await;
