@@ -122,6 +122,22 @@ pub async fn register(state: &crate::AppState, email: &Email, password: &Passwor
     Ok(user)
 }
 
+/// Mails a password-reset token if `email` has an account; does nothing
+/// otherwise (callers answer the same either way, revealing no accounts).
+pub async fn mail_password_reset(state: &crate::AppState, email: &Email) -> Result<(), ServiceError> {
+    let Some(user_id) = user_id_by_email(&state.pool, email).await? else { return Ok(()) };
+    let token = issue_email_token(&state.pool, &user_id, "reset").await?;
+    let body = format!(
+        "Someone asked to reset the password of your FBKSD account.\n\n\
+         Your reset token (valid once, for 48 hours):\n\n{token}\n\n\
+         Send it with your new password to {}/api/v1/password-resets/confirm.\n\
+         If it was not you, ignore this message: your password is unchanged.\n",
+        state.public_url
+    );
+    state.mailer.send(&state.config.mail_from, email.as_str(), "Reset your FBKSD password", body).await?;
+    Ok(())
+}
+
 /// Creates an account; `verified` accounts skip the e-mail step (the
 /// bootstrap administrator). A taken address is a 409.
 pub async fn create_user(

@@ -23,8 +23,6 @@ pub enum Refusal {
     Gone,
     /// Over a quota.
     TooMany,
-    /// Over a size limit.
-    TooLarge,
     /// The service failed (logged).
     Internal,
 }
@@ -73,20 +71,10 @@ impl ServiceError {
     pub fn too_many(code: &'static str, message: impl Into<String>) -> Self {
         Self::new(Refusal::TooMany, code, message)
     }
-    /// Over a size limit.
-    pub fn too_large(code: &'static str, message: impl Into<String>) -> Self {
-        Self::new(Refusal::TooLarge, code, message)
-    }
     /// The service failed: logged in full, shown as "internal error".
     pub fn internal(error: impl std::fmt::Display) -> Self {
         tracing::error!("internal error: {error}");
         Self::new(Refusal::Internal, "internal_error", "internal error (logged on the server)")
-    }
-}
-
-impl std::fmt::Display for ServiceError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.message)
     }
 }
 

@@ -143,17 +143,7 @@ pub async fn request_password_reset(
     Json(body): Json<ResetRequest>,
 ) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
     let email = Email::parse(&body.email)?;
-    if let Some(user_id) = accounts::user_id_by_email(&state.pool, &email).await? {
-        let token = accounts::issue_email_token(&state.pool, &user_id, "reset").await?;
-        let body = format!(
-            "Someone asked to reset the password of your FBKSD account.\n\n\
-             Your reset token (valid once, for 48 hours):\n\n{token}\n\n\
-             Send it with your new password to {}/api/v1/password-resets/confirm.\n\
-             If it was not you, ignore this message: your password is unchanged.\n",
-            state.public_url
-        );
-        state.mailer.send(&state.config.mail_from, email.as_str(), "Reset your FBKSD password", body).await?;
-    }
+    accounts::mail_password_reset(&state, &email).await?;
     let message = "if this address has an account, a reset token is on its way";
     Ok((StatusCode::ACCEPTED, Json(json!({ "message": message }))))
 }

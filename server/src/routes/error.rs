@@ -26,20 +26,19 @@ impl ApiError {
     }
     /// 400: the request is malformed or a value is invalid.
     pub fn bad_request(code: &'static str, message: impl Into<String>) -> Self {
-        Self::new(StatusCode::BAD_REQUEST, code, message)
+        ServiceError::invalid(code, message).into()
     }
     /// 401: not logged in, or wrong credentials.
     pub fn unauthorized(message: impl Into<String>) -> Self {
-        Self::new(StatusCode::UNAUTHORIZED, "unauthorized", message)
+        ServiceError::unauthenticated(message).into()
     }
     /// 403: logged in but not allowed.
     pub fn forbidden(code: &'static str, message: impl Into<String>) -> Self {
-        Self::new(StatusCode::FORBIDDEN, code, message)
+        ServiceError::forbidden(code, message).into()
     }
     /// 500: logged, and hidden from the client.
     pub fn internal(error: impl std::fmt::Display) -> Self {
-        tracing::error!("internal error: {error}");
-        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal_error", "internal error (logged on the server)")
+        ServiceError::internal(error).into()
     }
 }
 
@@ -53,7 +52,6 @@ impl From<ServiceError> for ApiError {
             Refusal::Conflict => StatusCode::CONFLICT,
             Refusal::Gone => StatusCode::GONE,
             Refusal::TooMany => StatusCode::TOO_MANY_REQUESTS,
-            Refusal::TooLarge => StatusCode::PAYLOAD_TOO_LARGE,
             Refusal::Internal => StatusCode::INTERNAL_SERVER_ERROR,
         };
         ApiError { status, code: e.code, message: e.message }
@@ -62,13 +60,7 @@ impl From<ServiceError> for ApiError {
 
 impl From<sqlx::Error> for ApiError {
     fn from(e: sqlx::Error) -> Self {
-        ApiError::internal(e)
-    }
-}
-
-impl From<crate::mail::MailError> for ApiError {
-    fn from(e: crate::mail::MailError) -> Self {
-        ApiError::internal(e)
+        ServiceError::from(e).into()
     }
 }
 
