@@ -9,8 +9,9 @@ APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3
     libopencv-core-dev libopencv-imgproc-dev libopencv-highgui-dev
     # fbksd-server: TLS for SMTP; PostgreSQL for its tests (and deployments).
     libssl-dev postgresql git
-    # A real browser for the page tests (the live job log).
-    chromium
+    # A real browser for the page tests (the live job log, the results
+    # viewer), driven over WebDriver.
+    chromium chromium-driver
     # fbksd-ci's base image is built from Debian packages (no registry).
     mmdebstrap)
 

@@ -159,6 +159,20 @@ impl Api {
         .map(drop)
     }
 
+    /// Whether the server already holds the viewer's pixels of reference
+    /// `hash`; when not, they go with the job's files.
+    pub async fn has_reference(&self, job: &Claim, hash: &str) -> Result<bool, ApiError> {
+        let what = format!("reference {hash}");
+        match self
+            .send(&what, JOB_PATIENCE, || self.job_request(job, reqwest::Method::GET, &format!("references/{hash}")))
+            .await
+        {
+            Ok(_) => Ok(true),
+            Err(ApiError::Refused { status: 404, .. }) => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
     /// Uploads the results (runs, metrics, scenes, provenance).
     pub async fn put_results(&self, job: &Claim, upload: &Upload) -> Result<(), ApiError> {
         self.send("the results", JOB_PATIENCE, || self.job_request(job, reqwest::Method::PUT, "results").json(upload))

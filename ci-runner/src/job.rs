@@ -481,6 +481,7 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
     let mut files = Vec::new();
     files_under(results, &results.join(path_safe_name(&info.short_name)), &mut files);
     files_under(results, &results.join("renderer-logs"), &mut files);
+    files.extend(references_to_upload(ctx, claim, results).await?);
     let failed = index.runs.iter().filter(|r| r.status != RunStatus::Ok).count();
     let message = if failed == 0 {
         format!("{} runs on {} scenes", index.runs.len(), ctx.scenes.len())
@@ -528,6 +529,35 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
         },
     };
     Ok((upload, files, message))
+}
+
+/// The viewer's pixel files of the references the server lacks (it keeps
+/// one per reference digest), written under `results/references/`.
+async fn references_to_upload(
+    ctx: &JobContext,
+    claim: &Claim,
+    results: &Path,
+) -> Result<Vec<(String, PathBuf)>, Failure> {
+    let mut out = Vec::new();
+    for scene in ctx.scenes.iter() {
+        if ctx.api.has_reference(claim, &scene.reference_hash).await? {
+            continue;
+        }
+        let Some(hex) = scene.reference_hash.strip_prefix("sha256:") else { continue };
+        let name = format!("references/{hex}.{}", fbksd_exchange::pixels::EXTENSION);
+        let path = results.join(&name);
+        let reference = scene.meta.reference_file();
+        let bytes =
+            tokio::task::spawn_blocking(move || fbksd_iqa::image::Image::read(&reference).map(|i| i.pixels_file()))
+                .await
+                .map_err(|e| Failure::infrastructure(format!("encoding a reference panicked: {e}")))?
+                .map_err(|e| Failure::infrastructure(format!("the reference of {}: {e}", scene.meta.name)))?;
+        std::fs::create_dir_all(results.join("references"))
+            .and_then(|()| std::fs::write(&path, bytes))
+            .map_err(|e| Failure::infrastructure(format!("{}: {e}", path.display())))?;
+        out.push((name, path));
+    }
+    Ok(out)
 }
 
 /// Every file under `dir` (sorted, `.git` left out), named relative to

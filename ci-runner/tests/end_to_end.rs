@@ -88,14 +88,32 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
         };
         assert!(mse(4) < mse(1), "MSE at 4 spp {} is not below MSE at 1 spp {}", mse(4), mse(1));
 
-        // The private page shows the set to its owner, and only to its owner.
+        // The private page shows the set to its owner, and only to its owner;
+        // its viewer gets every result's and reference's exact pixels.
         let page = ada.browser.get(&private).send().await.unwrap();
         assert_eq!(page.status(), 200);
-        let page = page.text().await.unwrap();
-        for scene in ["sphere", "fireflies", "cornell-box-small"] {
-            assert!(page.contains(scene), "the private page does not show {scene}");
-        }
+        assert!(page.text().await.unwrap().contains("id=\"fbksd-viewer\""));
         assert_eq!(reqwest::get(&private).await.unwrap().status(), 404);
+        let viewer = format!("{}/api/v1/results/{uuid}/viewer", server.url);
+        let (status, doc) = json_of(ada.api(Method::GET, viewer).send().await.unwrap()).await;
+        assert_eq!(status, 200, "{doc}");
+        let pixels_of = |address: String| {
+            let request = ada.api(Method::GET, format!("{}{address}", server.url));
+            async move {
+                let bytes = request.send().await.unwrap().bytes().await.unwrap();
+                fbksd_exchange::pixels::decode(&bytes).unwrap_or_else(|e| panic!("{address}: {e}"))
+            }
+        };
+        for scene in doc["scenes"].as_array().unwrap() {
+            let reference = pixels_of(scene["reference"].as_str().unwrap_or_else(|| panic!("{scene}")).into()).await;
+            assert!(reference.width > 0 && reference.values.iter().all(|v| v.is_finite()), "{scene}");
+            let run =
+                &doc["techniques"][0]["runs"].as_array().unwrap().iter().find(|r| r["scene"] == scene["name"]).unwrap();
+            let result = pixels_of(run["pixels"].as_str().unwrap_or_else(|| panic!("{run}")).into()).await;
+            assert_eq!((result.width, result.height), (reference.width, reference.height), "{scene}");
+            assert!(run["error_maps"]["MSE"].is_string() && run["log"].is_string(), "{run}");
+            assert!(run["wall_ms"].as_f64().unwrap() > 0.0 && run["peak_memory_bytes"].as_u64().unwrap() > 0, "{run}");
+        }
 
         // FBKSD_PUBLISH puts it on the public leaderboard.
         commit_all(repo.path(), "publish");

@@ -275,6 +275,9 @@ fn assemble(
                 image: None,
                 technique_ms: r.technique_ms,
                 render_ms: r.render_ms,
+                wall_ms: r.wall_ms,
+                cpu_ms: r.cpu_ms,
+                peak_memory_bytes: r.peak_memory_bytes as u64,
                 used_samples: r.used_samples as u64,
                 metrics: r.metrics.get(&sort).map(|v| (sort.clone(), *v)).into_iter().collect(),
             })
@@ -349,9 +352,13 @@ mod tests {
             message: String::new(),
             technique_ms: 1.0,
             render_ms: 1.0,
+            wall_ms: 2.0,
+            cpu_ms: 1.0,
+            peak_memory_bytes: 1 << 20,
             used_samples: 1,
             metrics,
             image: None,
+            log: None,
         }
     }
 

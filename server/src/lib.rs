@@ -34,6 +34,7 @@ pub mod projects;
 pub mod results;
 pub mod routes;
 pub mod runners;
+pub mod viewer;
 
 pub use app::{AppState, Application};
 

@@ -464,5 +464,6 @@ async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<Strin
         let _ = tokio::fs::rename(&target, &staging).await;
         return Err(e.into());
     }
+    crate::results::keep_references(&state.config.data_dir, &target, &upload).await;
     Ok(id)
 }

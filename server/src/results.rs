@@ -109,12 +109,20 @@ pub struct StoredRun {
     pub technique_ms: f64,
     /// Render time.
     pub render_ms: f64,
+    /// Wall time (0 if not recorded).
+    pub wall_ms: f64,
+    /// CPU time (0 if not recorded).
+    pub cpu_ms: f64,
+    /// Peak memory (0 if not recorded).
+    pub peak_memory_bytes: i64,
     /// Samples used.
     pub used_samples: i64,
     /// Metric values.
     pub metrics: BTreeMap<String, f64>,
     /// Uploaded image file, if any.
     pub image: Option<String>,
+    /// The run's record among the set's files (not stored before the viewer).
+    pub log: Option<String>,
 }
 
 const SET_COLUMNS: &str = "r.id, r.technique, p.name AS project_name, r.user_id, r.info, r.commit_sha, r.season, \
@@ -214,8 +222,8 @@ impl Selection<'_> {
 /// The runs of the selected result sets (one query).
 pub async fn runs(pool: &AnyPool, which: Selection<'_>) -> Result<Vec<StoredRun>, sqlx::Error> {
     let sql = format!(
-        "SELECT result_id, scene, spp, status, message, technique_ms, render_ms, used_samples, metric_values, image \
-         FROM result_runs WHERE {} ORDER BY result_id, scene, spp",
+        "SELECT result_id, scene, spp, status, message, technique_ms, render_ms, wall_ms, cpu_ms, peak_memory_bytes, \
+         used_samples, metric_values, image, log FROM result_runs WHERE {} ORDER BY result_id, scene, spp",
         which.condition()
     );
     let rows = which.bind(sqlx::query(&sql)).fetch_all(pool).await?;
@@ -230,9 +238,13 @@ pub async fn runs(pool: &AnyPool, which: Selection<'_>) -> Result<Vec<StoredRun>
                 message: r.try_get("message")?,
                 technique_ms: r.try_get("technique_ms")?,
                 render_ms: r.try_get("render_ms")?,
+                wall_ms: r.try_get("wall_ms")?,
+                cpu_ms: r.try_get("cpu_ms")?,
+                peak_memory_bytes: r.try_get("peak_memory_bytes")?,
                 used_samples: r.try_get("used_samples")?,
                 metrics: serde_json::from_str(&values).unwrap_or_default(),
                 image: r.try_get("image")?,
+                log: r.try_get("log")?,
             })
         })
         .collect()
@@ -303,8 +315,9 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
     .await?;
     for run in &new.upload.runs {
         sqlx::query(
-            "INSERT INTO result_runs (result_id, scene, spp, status, message, technique_ms, render_ms, used_samples, \
-             metric_values, image) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
+            "INSERT INTO result_runs (result_id, scene, spp, status, message, technique_ms, render_ms, wall_ms, cpu_ms, \
+             peak_memory_bytes, used_samples, metric_values, image, log) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14)",
         )
         .bind(&id)
         .bind(&run.scene)
@@ -313,9 +326,13 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
         .bind(&run.message)
         .bind(run.technique_ms)
         .bind(run.render_ms)
+        .bind(run.wall_ms)
+        .bind(run.cpu_ms)
+        .bind(run.peak_memory_bytes as i64)
         .bind(run.used_samples as i64)
         .bind(serde_json::to_string(&run.metrics).unwrap_or_default())
         .bind(run.image.as_deref())
+        .bind(Some(run.log.as_str()).filter(|l| !l.is_empty()))
         .execute(&mut **tx)
         .await?;
     }
@@ -450,4 +467,52 @@ pub async fn current_season(pool: &AnyPool) -> Result<i64, sqlx::Error> {
 pub async fn seasons(pool: &AnyPool) -> Result<Vec<(i64, String, i64)>, sqlx::Error> {
     let rows = sqlx::query("SELECT number, note, started_at FROM seasons ORDER BY number").fetch_all(pool).await?;
     rows.iter().map(|r| Ok((r.try_get("number")?, r.try_get("note")?, r.try_get("started_at")?))).collect()
+}
+
+/// Where the references' pixel files live: one per reference digest,
+/// shared by every set scored against it (`references/<hex>.fbpx`).
+pub fn reference_pixels(data_dir: &std::path::Path, reference_hash: &str) -> Option<std::path::PathBuf> {
+    let hex = reference_hash.strip_prefix("sha256:")?;
+    (hex.len() == 64 && hex.chars().all(|c| c.is_ascii_hexdigit()))
+        .then(|| data_dir.join("references").join(format!("{hex}.{}", fbksd_exchange::pixels::EXTENSION)))
+}
+
+/// The name under which a runner uploads a reference's pixel file with a
+/// job's files, when the server lacks it.
+pub fn uploaded_reference_name(reference_hash: &str) -> Option<String> {
+    let hex = reference_hash.strip_prefix("sha256:")?;
+    Some(format!("references/{hex}.{}", fbksd_exchange::pixels::EXTENSION))
+}
+
+/// Moves the references a job uploaded among a new set's files to the
+/// shared store (keeping a copy already there), and drops the rest of
+/// `references/`.
+pub async fn keep_references(data_dir: &std::path::Path, set_dir: &std::path::Path, upload: &Upload) {
+    for scene in &upload.scenes {
+        let (Some(name), Some(store)) =
+            (uploaded_reference_name(&scene.reference_hash), reference_pixels(data_dir, &scene.reference_hash))
+        else {
+            continue;
+        };
+        let staged = set_dir.join(name);
+        if staged.is_file() && !store.is_file() {
+            if let Some(parent) = store.parent() {
+                let _ = tokio::fs::create_dir_all(parent).await;
+            }
+            if let Err(e) = tokio::fs::rename(&staged, &store).await {
+                tracing::warn!("keeping reference {}: {e}", scene.reference_hash);
+            }
+        }
+    }
+    let _ = tokio::fs::remove_dir_all(set_dir.join("references")).await;
+}
+
+/// The reference digest a set's scene was scored against.
+pub async fn reference_hash(pool: &AnyPool, set_id: &str, scene: &str) -> Result<Option<String>, sqlx::Error> {
+    let row = sqlx::query("SELECT reference_hash FROM result_scenes WHERE result_id = $1 AND scene = $2")
+        .bind(set_id)
+        .bind(scene)
+        .fetch_optional(pool)
+        .await?;
+    row.map(|r| r.try_get("reference_hash")).transpose()
 }

@@ -3,6 +3,7 @@
 
 mod bench;
 mod iqa;
+mod page;
 mod results;
 mod run;
 
@@ -20,7 +21,7 @@ struct Cli {
 enum Command {
     /// Run techniques on scenes at several sample budgets and write the results.
     Run(run::RunArgs),
-    /// Compute or show the metric values of a results directory.
+    /// Compute or show the metric values of a results directory, or write its viewer.
     #[command(subcommand)]
     Results(results::ResultsCommand),
     /// Image quality metrics: list, compute one, benchmark.

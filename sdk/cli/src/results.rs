@@ -1,5 +1,5 @@
-//! `fbksd results compute | show`: metric values for a results directory,
-//! and tables and ranking.
+//! `fbksd results compute | show | page`: metric values for a results
+//! directory, tables and ranking, and the results viewer as a static folder.
 
 use anyhow::Context;
 use clap::Subcommand;
@@ -33,6 +33,19 @@ pub enum ResultsCommand {
         /// The results directory.
         #[arg(long, default_value = "fbksd-results")]
         results: PathBuf,
+    },
+    /// Write the results viewer (images, charts, ranking, costs) as a
+    /// static folder that opens from file:// or any static server.
+    Page {
+        /// The results directory.
+        #[arg(long, default_value = "fbksd-results")]
+        results: PathBuf,
+        /// Where to look for scenes (their references). Repeatable.
+        #[arg(long = "scenes", default_value = "scenes")]
+        scenes: Vec<PathBuf>,
+        /// The folder to write [default: <results>/page].
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -68,6 +81,23 @@ pub fn results(command: ResultsCommand) -> anyhow::Result<()> {
             Ok(())
         }
         ResultsCommand::Show { results } => show(&results),
+        ResultsCommand::Page { results, scenes, out } => {
+            let out = out.unwrap_or_else(|| results.join("page"));
+            let scenes = find_scenes(&scenes).context("reading the scene directories")?;
+            let written = crate::page::write(&ResultsDir::create(&results)?, &scenes, &out)?;
+            for note in &written.notes {
+                eprintln!("note: {note}");
+            }
+            let index = out.join("index.html");
+            let index = std::fs::canonicalize(&index).unwrap_or(index);
+            eprintln!(
+                "wrote {} pixel files ({:.1} MB); open file://{}",
+                written.pixel_files,
+                written.pixel_bytes as f64 / 1e6,
+                index.display()
+            );
+            Ok(())
+        }
     }
 }
 

@@ -13,14 +13,18 @@
 //! - [`technique`]: a technique repository's `info.json`.
 //! - [`ranking`]: techniques ranked by mean rank over the index.
 //! - [`runner_api`]: the messages of the runner API, job kinds and states.
+//! - [`pixels`]: the viewer's pixel files (exact floats, small on the wire).
+//! - [`viewer`]: the results viewer's document.
 #![deny(missing_docs)]
 
+pub mod pixels;
 pub mod ranking;
 pub mod record;
 pub mod results;
 pub mod runner_api;
 pub mod scenes;
 pub mod technique;
+pub mod viewer;
 
 pub use record::{FailureReason, RunRecord, RunStatus, Times};
 pub use results::MetricInfo;

@@ -92,6 +92,9 @@ mod tests {
             image: None,
             technique_ms: 0.0,
             render_ms: 0.0,
+            wall_ms: 0.0,
+            cpu_ms: 0.0,
+            peak_memory_bytes: 0,
             used_samples: 0,
             metrics: metrics.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
         }

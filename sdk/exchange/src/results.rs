@@ -3,6 +3,7 @@
 //! ```text
 //! <results>/index.json                              every run, one entry each
 //! <results>/<technique>/<scene>/<spp>_0.exr         result image (32-bit float, scanline)
+//! <results>/<technique>/<scene>/<spp>_0.fbpx        the same pixels for the viewer (`crate::pixels`)
 //! <results>/<technique>/<scene>/<spp>_0_log.json    the run's RunRecord
 //! <results>/<technique>/<scene>/<spp>_0_technique.log   the technique's stdout and stderr
 //! <results>/<technique>/<scene>/<spp>_0_<METRIC>.json    a metric's value (`fbksd results compute`)
@@ -43,6 +44,10 @@ impl RunFiles {
     /// The run's [`RunRecord`].
     pub fn log(self) -> String {
         format!("{}_0_log.json", self.spp)
+    }
+    /// The result's pixels for the viewer ([`crate::pixels`]).
+    pub fn pixels(self) -> String {
+        format!("{}_0.{}", self.spp, crate::pixels::EXTENSION)
     }
     /// The technique's stdout and stderr.
     pub fn technique_log(self) -> String {
@@ -95,6 +100,16 @@ pub struct IndexEntry {
     pub technique_ms: f64,
     /// Render time in ms.
     pub render_ms: f64,
+    /// Wall time in ms, from starting the technique to its result (0 in
+    /// indexes written before it was recorded).
+    #[serde(default)]
+    pub wall_ms: f64,
+    /// CPU time of the technique process in ms.
+    #[serde(default)]
+    pub cpu_ms: f64,
+    /// Peak resident memory of the technique process in bytes.
+    #[serde(default)]
+    pub peak_memory_bytes: u64,
     /// Samples used.
     pub used_samples: u64,
     /// Metric values by acronym (filled by `fbksd results compute`).
@@ -175,6 +190,9 @@ impl ResultsDir {
             image: image_path.map(rel),
             technique_ms: record.times.technique_ms,
             render_ms: record.times.render_ms,
+            wall_ms: record.times.wall_ms,
+            cpu_ms: record.times.cpu_ms,
+            peak_memory_bytes: record.peak_memory_bytes,
             used_samples: record.used_samples,
             metrics: Default::default(),
         };
@@ -185,6 +203,7 @@ impl ResultsDir {
         {
             let dir = self.root.join(&old.technique).join(&old.scene);
             let files = RunFiles { spp: old.spp };
+            let _ = std::fs::remove_file(dir.join(files.pixels()));
             for metric in old.metrics.keys() {
                 let _ = std::fs::remove_file(dir.join(files.metric_value(metric)));
                 let _ = std::fs::remove_file(dir.join(files.error_map(metric)));

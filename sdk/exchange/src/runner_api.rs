@@ -9,6 +9,9 @@
 //! POST /api/v1/jobs/{id}/heartbeat  → Lease
 //! POST /api/v1/jobs/{id}/log        text body (appended)
 //! PUT  /api/v1/jobs/{id}/files/{*}  a file of the result set
+//! GET  /api/v1/jobs/{id}/references/{sha256:hex}  204 if the server holds that
+//!                                    reference's pixels, else 404: upload them
+//!                                    as files/references/<hex>.fbpx
 //! PUT  /api/v1/jobs/{id}/results    Upload
 //! POST /api/v1/jobs/{id}/finish     Outcome → Finished
 //! ```

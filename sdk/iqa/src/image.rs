@@ -31,6 +31,11 @@ impl Image {
     pub fn pixels(&self) -> usize {
         self.width as usize * self.height as usize
     }
+
+    /// The image as the results viewer's pixel file ([`fbksd_exchange::pixels`]).
+    pub fn pixels_file(&self) -> Vec<u8> {
+        fbksd_exchange::pixels::encode(self.width, self.height, 3, &self.rgb)
+    }
 }
 
 /// Writes a `width × height` RGB float image as a 32-bit float, scanline,

@@ -2,7 +2,8 @@
 //!
 //! `compute` is incremental: a run's metric is computed only when its value
 //! file ([`RunFiles::metric_value`]) is missing; error maps go beside it
-//! ([`RunFiles::error_map`]). Values are also gathered into `index.json`.
+//! ([`RunFiles::error_map`]), and so does the viewer's pixel file of the
+//! image ([`RunFiles::pixels`]). Values are also gathered into `index.json`.
 //! Ranking the techniques is [`fbksd_exchange::ranking`]'s.
 
 use fbksd_exchange::results::{path_safe_name, IndexEntry, ResultsDir, RunFiles};
@@ -93,6 +94,13 @@ pub fn compute(
             summary.skipped.push(format!("{what}: status {}", entry.status));
             continue;
         };
+        let test_path = results.root().join(&image);
+        let mut test: Option<Image> = None;
+        let pixels_file = test_path.with_file_name(RunFiles { spp: entry.spp }.pixels());
+        if !pixels_file.is_file() {
+            let image = test.insert(Image::read(&test_path)?);
+            std::fs::write(&pixels_file, image.pixels_file())?;
+        }
         let Some(meta) = scenes.get(&entry.scene) else {
             summary.skipped.push(format!("{what}: no scene named {:?} in the scene directories", entry.scene));
             continue;
@@ -107,9 +115,7 @@ pub fn compute(
             ));
             continue;
         }
-        let test_path = results.root().join(&image);
         let dir = test_path.parent().unwrap_or(results.root()).to_path_buf();
-        let mut test: Option<Image> = None;
         for metric in metrics {
             let acronym = metric.info().acronym;
             let files = RunFiles { spp: entry.spp };

@@ -60,10 +60,12 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/jobs/{id}/log/stream", get(projects::log_stream))
         .route("/api/v1/jobs/{id}/cancel", post(projects::cancel))
         .route("/api/v1/results/{id}", get(results::show).delete(results::discard))
+        .route("/api/v1/results/{id}/viewer", get(results::viewer))
         .route("/api/v1/results/{id}/publish", post(results::publish))
         .route("/api/v1/results/{id}/unpublish", post(results::unpublish))
         .route("/api/v1/leaderboard", get(results::board))
         .route("/results/{id}/files/{*name}", get(results::file))
+        .route("/results/{id}/references/{scene}", get(results::reference))
         // Git, with personal access tokens (HTTP Basic password) or a job token.
         .route("/git/{repo}/{*rest}", any(projects::git))
         // Runners, with their runner token or a job token.
@@ -73,6 +75,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/jobs/{id}/heartbeat", post(runner::heartbeat))
         .route("/api/v1/jobs/{id}/results", put(runner::put_results))
         .route("/api/v1/jobs/{id}/files/{*name}", put(runner::put_file))
+        .route("/api/v1/jobs/{id}/references/{hash}", get(runner::has_reference))
         .route("/api/v1/jobs/{id}/finish", post(runner::finish))
         // Administrators.
         .route("/api/v1/admin/jobs", get(admin::jobs))
@@ -85,6 +88,7 @@ pub fn router(state: AppState) -> Router {
         // Pages, with CSRF-checked forms.
         .route("/", get(pages::home))
         .route("/static/{name}", get(pages::static_file))
+        .route("/static/viewer/{name}", get(pages::viewer_file))
         .route("/login", get(pages::login_form).post(pages::login))
         .route("/register", get(pages::register_form).post(pages::register))
         .route("/logout", post(pages::logout))

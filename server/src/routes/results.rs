@@ -104,6 +104,18 @@ pub async fn unhide(
     }
 }
 
+/// `GET /api/v1/results/{id}/viewer`: the results viewer's document.
+pub async fn viewer(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let set = results::visible(&state.pool, &id, user.as_ref()).await?;
+    let doc = crate::viewer::document(&state.pool, &state.config.data_dir, &set).await?;
+    // Other techniques' sets change when they are published: never cached.
+    Ok(([(header::CACHE_CONTROL, "private, no-cache")], Json(doc)).into_response())
+}
+
 /// `GET /results/{id}/files/{*name}`: a file of a set the caller may see.
 pub async fn file(
     State(state): State<AppState>,
@@ -116,7 +128,38 @@ pub async fn file(
     let bytes = tokio::fs::read(&path)
         .await
         .map_err(|_| ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no file {name} in result set {id}")))?;
-    let kind = if name.ends_with(".png") { "image/png" } else { "application/octet-stream" };
+    let kind = match name.rsplit_once('.').map(|(_, ext)| ext) {
+        Some("png") => "image/png",
+        Some("exr") => "image/x-exr",
+        Some("json") => "application/json",
+        Some("log") => "text/plain; charset=utf-8",
+        _ => "application/octet-stream",
+    };
+    // A set's files never change: the browser keeps them.
     Ok(([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], bytes)
+        .into_response())
+}
+
+/// `GET /results/{id}/references/{scene}`: the pixel file of the reference
+/// that the set's scene was scored against.
+pub async fn reference(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path((id, scene)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let set = results::visible(&state.pool, &id, user.as_ref()).await?;
+    let not_found = || {
+        ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no reference of scene {scene:?} in result set {id}"))
+    };
+    let hash = results::reference_hash(&state.pool, &set.id, &scene).await?.ok_or_else(not_found)?;
+    let path = results::reference_pixels(&state.config.data_dir, &hash).ok_or_else(not_found)?;
+    let bytes = tokio::fs::read(&path).await.map_err(|_| not_found())?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream"),
+            (header::CACHE_CONTROL, "private, max-age=86400, immutable"),
+        ],
+        bytes,
+    )
         .into_response())
 }

@@ -143,6 +143,24 @@ pub async fn put_file(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// `GET /api/v1/jobs/{id}/references/{hash}`: 204 when the server already
+/// holds the pixel file of reference `hash` (`sha256:<hex>`), 404 when the
+/// runner should upload it with the job's files
+/// (`references/<hex>.fbpx`).
+pub async fn has_reference(
+    State(state): State<AppState>,
+    _job: JobCaller,
+    Path((_, hash)): Path<(String, String)>,
+) -> Result<StatusCode, ApiError> {
+    match crate::results::reference_pixels(&state.config.data_dir, &hash) {
+        Some(path) if tokio::fs::try_exists(&path).await.unwrap_or(false) => Ok(StatusCode::NO_CONTENT),
+        Some(_) => {
+            Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no reference {hash} yet: upload it")))
+        }
+        None => Err(ApiError::bad_request("invalid_hash", format!("{hash:?} is not sha256:<64 hex digits>"))),
+    }
+}
+
 /// `PUT /api/v1/jobs/{id}/results`: the results (checked now; stored
 /// when the job reports success).
 pub async fn put_results(

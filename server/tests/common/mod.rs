@@ -394,6 +394,96 @@ pub async fn upload_results(runner: &FakeRunner, job: &HeldJob, quality: f64) {
     assert_eq!(status, 204);
 }
 
+/// A scene of [`Pictured`] results.
+pub struct PicturedScene<'a> {
+    pub name: &'a str,
+    pub tags: &'a [&'a str],
+    pub reference_hash: &'a str,
+}
+
+/// One technique's results with real pixel files, as the runner uploads
+/// them: per scene and spp the viewer's pixel file, the image, its record,
+/// the technique's log and an MSE error map; MSE and PSNR values.
+pub struct Pictured<'a> {
+    pub technique: &'a str,
+    pub scenes: &'a [PicturedScene<'a>],
+    pub spps: &'a [u64],
+    pub size: (u32, u32),
+    /// A scene's reference (interleaved RGB).
+    pub reference: &'a dyn Fn(usize) -> Vec<f32>,
+    /// The technique's image of a scene at an spp.
+    pub image: &'a dyn Fn(usize, u64) -> Vec<f32>,
+    pub mse: &'a dyn Fn(usize, u64) -> f64,
+    pub technique_ms: &'a dyn Fn(usize, u64) -> f64,
+    /// The bytes uploaded as the run's EXR.
+    pub exr: &'a dyn Fn(&[f32]) -> Vec<u8>,
+}
+
+/// Uploads `p` for `job` (references only where the server lacks them) and
+/// reports success; the result set's UUID and how many references were sent.
+pub async fn upload_pictured(runner: &FakeRunner, job: &HeldJob, p: &Pictured<'_>) -> (String, usize) {
+    let put = |name: String, bytes: Vec<u8>| async move {
+        assert_eq!(job.send(runner, reqwest::Method::PUT, &format!("files/{name}"), bytes.into()).await, 204, "{name}");
+    };
+    let (w, h) = p.size;
+    let mut map = Vec::new();
+    image::RgbImage::from_pixel(w, h, image::Rgb([200, 30, 30]))
+        .write_to(&mut std::io::Cursor::new(&mut map), image::ImageFormat::Png)
+        .unwrap();
+    let mut runs = Vec::new();
+    for (s, scene) in p.scenes.iter().enumerate() {
+        for &spp in p.spps {
+            let dir = format!("{}/{}", p.technique, scene.name);
+            let image = (p.image)(s, spp);
+            put(format!("{dir}/{spp}_0.fbpx"), fbksd_exchange::pixels::encode(w, h, 3, &image)).await;
+            put(format!("{dir}/{spp}_0.exr"), (p.exr)(&image)).await;
+            put(format!("{dir}/{spp}_0_log.json"), b"{}".to_vec()).await;
+            put(format!("{dir}/{spp}_0_technique.log"), format!("{} at {spp} spp\n", p.technique).into_bytes()).await;
+            put(format!("{dir}/{spp}_0_MSE_map.png"), map.clone()).await;
+            let mse = (p.mse)(s, spp);
+            let technique_ms = (p.technique_ms)(s, spp);
+            runs.push(serde_json::json!({
+                "technique": p.technique, "scene": scene.name, "spp": spp, "status": "ok", "message": "",
+                "log": format!("{dir}/{spp}_0_log.json"), "image": format!("{dir}/{spp}_0.exr"),
+                "technique_ms": technique_ms, "render_ms": 10.0 * spp as f64,
+                "wall_ms": technique_ms + 10.0 * spp as f64, "cpu_ms": 3.0 * spp as f64, "peak_memory_bytes": 12 << 20,
+                "used_samples": spp * (w * h) as u64,
+                "metrics": { "MSE": mse, "PSNR": -10.0 * mse.log10() }
+            }));
+        }
+    }
+    let mut sent = 0;
+    for (s, scene) in p.scenes.iter().enumerate() {
+        let hash = scene.reference_hash;
+        let held =
+            runner.job_request(reqwest::Method::GET, &job.id, &job.token, &format!("references/{hash}")).send().await;
+        match held.unwrap().status().as_u16() {
+            204 => {}
+            404 => {
+                let name = format!("references/{}.fbpx", hash.trim_start_matches("sha256:"));
+                put(name, fbksd_exchange::pixels::encode(w, h, 3, &(p.reference)(s))).await;
+                sent += 1;
+            }
+            other => panic!("asking for reference {hash}: {other}"),
+        }
+    }
+    let upload = serde_json::json!({
+        "runs": runs,
+        "metrics": [
+            { "acronym": "MSE", "name": "Mean squared error", "reference": "", "lower_is_better": true, "has_error_map": true },
+            { "acronym": "PSNR", "name": "Peak signal-to-noise ratio", "reference": "", "lower_is_better": false, "has_error_map": false }
+        ],
+        "scenes": p.scenes.iter().map(|s| serde_json::json!({
+            "name": s.name, "tags": s.tags, "scene_hash": "sha256:aa", "reference_hash": s.reference_hash
+        })).collect::<Vec<_>>(),
+        "provenance": { "runner": "fake" }
+    });
+    assert_eq!(job.send(runner, reqwest::Method::PUT, "results", upload.to_string().into()).await, 204);
+    let (status, body) = job.finish(runner, serde_json::json!({ "state": "succeeded" })).await;
+    assert_eq!(status, 200, "{body}");
+    (body["result_id"].as_str().unwrap().to_string(), sent)
+}
+
 /// A program started by a test, with everything it prints (stdout and
 /// stderr, line by line) collected as it goes.
 pub struct Captured {

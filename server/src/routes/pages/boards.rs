@@ -67,6 +67,8 @@ struct BoardPage {
     how_to: Option<HowTo>,
     /// What the service still prepares (home page only).
     preparing: Vec<String>,
+    /// The results viewer's scripts (result pages).
+    viewer_tags: String,
 }
 
 async fn board_page(
@@ -103,7 +105,12 @@ async fn board_page(
                 .entries
                 .iter()
                 .map(|e| EntryView {
-                    image: e.image.as_ref().map(|i| format!("/results/{}/files/{i}", e.result_id)).unwrap_or_default(),
+                    // The viewer of the entry's set, opened on this scene and spp.
+                    image: e
+                        .image
+                        .as_ref()
+                        .map(|_| format!("/results/{}#scene={}&spp={}", e.result_id, g.scene, g.spp))
+                        .unwrap_or_default(),
                     // Full names need not be unique: the project's name tells them apart.
                     technique: format!("{} ({})", e.full_name, e.technique),
                     highlighted: e.highlighted,
@@ -151,6 +158,7 @@ async fn board_page(
         tag,
         standings,
         groups,
+        viewer_tags: fbksd_exchange::viewer::asset_tags("/static/viewer/"),
     };
     Ok(render(&page))
 }

@@ -1,0 +1,152 @@
+//! The results viewer's document: everything `frontend/static/viewer/`
+//! shows, as one JSON value. The server builds it from its database
+//! (`GET /api/v1/results/<id>/viewer`) and `fbksd results page` from a
+//! results directory, so the one viewer reads both.
+//!
+//! Addresses (`pixels`, `log`, `error_maps`, a scene's `reference`) are
+//! relative to the page. How the viewer loads pixels depends on
+//! [`Delivery`]: a page from a server fetches them; a folder opened from
+//! `file://`, where browsers refuse `fetch`, loads them as scripts.
+
+use crate::results::MetricInfo;
+use crate::RunStatus;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Format tag of the document.
+pub const FORMAT: &str = "fbksd-viewer";
+/// Version of the document's format.
+pub const VERSION: u32 = 1;
+
+/// How the viewer loads pixel files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Delivery {
+    /// `fetch(address)` returns the `.fbpx` bytes.
+    Fetch,
+    /// `<script src=address>` calls `fbksdPixels(address, base64)`.
+    Script,
+}
+
+/// The viewer's document.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewerData {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Always [`VERSION`].
+    pub version: u32,
+    /// The page's heading.
+    pub title: String,
+    /// How pixels load.
+    pub delivery: Delivery,
+    /// The technique (its [`ViewerTechnique::key`]) whose row stands out.
+    pub highlight: Option<String>,
+    /// The metrics the values are in.
+    pub metrics: Vec<MetricInfo>,
+    /// The scenes, by name.
+    pub scenes: Vec<ViewerScene>,
+    /// The techniques compared.
+    pub techniques: Vec<ViewerTechnique>,
+}
+
+impl ViewerData {
+    /// An empty document.
+    pub fn new(title: impl Into<String>, delivery: Delivery) -> ViewerData {
+        ViewerData {
+            format: FORMAT.into(),
+            version: VERSION,
+            title: title.into(),
+            delivery,
+            highlight: None,
+            metrics: Vec::new(),
+            scenes: Vec::new(),
+            techniques: Vec::new(),
+        }
+    }
+}
+
+/// A scene of the document.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewerScene {
+    /// Scene name.
+    pub name: String,
+    /// Its pool tags.
+    pub tags: Vec<String>,
+    /// The reference's pixel file, when known.
+    pub reference: Option<String>,
+}
+
+/// A technique of the document.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewerTechnique {
+    /// Unique within the document (a result set's UUID, or a name).
+    pub key: String,
+    /// Short name.
+    pub name: String,
+    /// Full name.
+    pub full_name: String,
+    /// Citation, if any.
+    pub citation: String,
+    /// Its runs.
+    pub runs: Vec<ViewerRun>,
+}
+
+/// One run of a technique.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewerRun {
+    /// Scene name.
+    pub scene: String,
+    /// Budget in samples per pixel.
+    pub spp: u64,
+    /// Typed status.
+    pub status: RunStatus,
+    /// Why (empty for ok).
+    pub message: String,
+    /// Technique time in ms.
+    pub technique_ms: f64,
+    /// Render time in ms.
+    pub render_ms: f64,
+    /// Wall time in ms (0 when not recorded).
+    pub wall_ms: f64,
+    /// CPU time in ms (0 when not recorded).
+    pub cpu_ms: f64,
+    /// Peak resident memory in bytes (0 when not recorded).
+    pub peak_memory_bytes: u64,
+    /// Samples used.
+    pub used_samples: u64,
+    /// Metric values by acronym.
+    pub metrics: BTreeMap<String, f64>,
+    /// The result's pixel file.
+    pub pixels: Option<String>,
+    /// The technique's output.
+    pub log: Option<String>,
+    /// Error maps (PNG) by metric acronym.
+    pub error_maps: BTreeMap<String, String>,
+}
+
+/// The viewer's code (`frontend/static/viewer/`), compiled in so that the
+/// server and `fbksd results page` ship the same files: (name, text), in
+/// the order the page loads them.
+pub const ASSETS: &[(&str, &str)] = &[
+    ("viewer.css", include_str!("../../../frontend/static/viewer/viewer.css")),
+    ("pixels.js", include_str!("../../../frontend/static/viewer/pixels.js")),
+    ("images.js", include_str!("../../../frontend/static/viewer/images.js")),
+    ("charts.js", include_str!("../../../frontend/static/viewer/charts.js")),
+    ("tables.js", include_str!("../../../frontend/static/viewer/tables.js")),
+    ("viewer.js", include_str!("../../../frontend/static/viewer/viewer.js")),
+];
+
+/// The `<link>` and `<script>` tags that load [`ASSETS`] from `base`
+/// (`"/static/viewer/"`, or `"viewer/"` in a static folder).
+pub fn asset_tags(base: &str) -> String {
+    ASSETS
+        .iter()
+        .map(|(name, _)| {
+            if name.ends_with(".css") {
+                format!("<link rel=\"stylesheet\" href=\"{base}{name}\">\n")
+            } else {
+                format!("<script src=\"{base}{name}\"></script>\n")
+            }
+        })
+        .collect()
+}

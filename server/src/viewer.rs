@@ -1,0 +1,96 @@
+//! The results viewer's document for a result set: the set beside every
+//! published technique of its season, on the set's scenes, with the
+//! addresses of every file the viewer may show (pixels, error maps, logs,
+//! references). `frontend/static/viewer/` draws it; `fbksd results page`
+//! writes the same document for a local results directory.
+//!
+//! Only files that exist are named, so the viewer never offers an image it
+//! cannot load (sets stored before the viewer have no pixel files).
+
+use crate::error::ServiceError;
+use crate::results::{self, ResultSet, Selection, StoredRun};
+use fbksd_exchange::results::RunFiles;
+use fbksd_exchange::viewer::{Delivery, ViewerData, ViewerRun, ViewerScene, ViewerTechnique};
+use fbksd_exchange::RunStatus;
+use sqlx::AnyPool;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+/// The viewer's document for `set` (which the caller may see).
+pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Result<ViewerData, ServiceError> {
+    let mut sets = vec![set.clone()];
+    sets.extend(results::published(pool, set.season).await?.into_iter().filter(|s| s.id != set.id));
+    let mut runs = results::runs(pool, Selection::One(&set.id)).await?;
+    runs.extend(
+        results::runs(pool, Selection::Published(set.season)).await?.into_iter().filter(|r| r.result_id != set.id),
+    );
+    let mut tags = BTreeMap::new();
+    results::scene_tags(pool, Selection::One(&set.id), &mut tags).await?;
+
+    let mut doc = ViewerData::new(format!("Results of {}", set.full_name()), Delivery::Fetch);
+    doc.highlight = Some(set.id.clone());
+    doc.metrics = set.metrics.clone();
+    for (name, tags) in &tags {
+        let reference = match results::reference_hash(pool, &set.id, name).await? {
+            Some(hash) if results::reference_pixels(data_dir, &hash).is_some_and(|p| p.is_file()) => {
+                Some(format!("/results/{}/references/{name}", set.id))
+            }
+            _ => None,
+        };
+        doc.scenes.push(ViewerScene { name: name.clone(), tags: tags.iter().cloned().collect(), reference });
+    }
+    let metrics_with_maps: Vec<String> =
+        set.metrics.iter().filter(|m| m.has_error_map).map(|m| m.acronym.clone()).collect();
+    let data_dir = data_dir.to_path_buf();
+    let scenes: BTreeSet<String> = tags.into_keys().collect();
+    // Existence checks touch the disk once per file: off the async threads.
+    let techniques = tokio::task::spawn_blocking(move || {
+        sets.iter()
+            .map(|s| ViewerTechnique {
+                key: s.id.clone(),
+                name: s.technique.clone(),
+                full_name: s.full_name().to_string(),
+                citation: s.info["citation"].as_str().unwrap_or("").trim().to_string(),
+                runs: runs
+                    .iter()
+                    .filter(|r| r.result_id == s.id && scenes.contains(&r.scene))
+                    .map(|r| viewer_run(&data_dir, r, &metrics_with_maps))
+                    .collect(),
+            })
+            .collect::<Vec<_>>()
+    })
+    .await
+    .map_err(ServiceError::internal)?;
+    doc.techniques = techniques;
+    Ok(doc)
+}
+
+fn viewer_run(data_dir: &Path, run: &StoredRun, metrics_with_maps: &[String]) -> ViewerRun {
+    let files = results::files_dir(data_dir, &run.result_id);
+    let files_of_run = RunFiles { spp: run.spp as u64 };
+    // The run's directory among the set's files: beside its record or image.
+    let dir = run.log.as_deref().or(run.image.as_deref()).and_then(|f| Path::new(f).parent()).map(Path::to_path_buf);
+    let existing = |name: String| -> Option<String> {
+        let rel = dir.as_ref()?.join(name);
+        files.join(&rel).is_file().then(|| format!("/results/{}/files/{}", run.result_id, rel.to_string_lossy()))
+    };
+    ViewerRun {
+        scene: run.scene.clone(),
+        spp: run.spp as u64,
+        status: serde_json::from_value(serde_json::Value::String(run.status.clone())).unwrap_or(RunStatus::Crashed),
+        message: run.message.clone(),
+        technique_ms: run.technique_ms,
+        render_ms: run.render_ms,
+        wall_ms: run.wall_ms,
+        cpu_ms: run.cpu_ms,
+        peak_memory_bytes: run.peak_memory_bytes.max(0) as u64,
+        used_samples: run.used_samples.max(0) as u64,
+        metrics: run.metrics.clone(),
+        pixels: existing(files_of_run.pixels()),
+        log: existing(files_of_run.technique_log()),
+        error_maps: metrics_with_maps
+            .iter()
+            .filter_map(|m| Some((m.clone(), existing(files_of_run.error_map(m))?)))
+            .collect(),
+    }
+}
