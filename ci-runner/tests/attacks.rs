@@ -219,7 +219,9 @@ async fn every_attack_is_contained_with_a_typed_reason() {
     let port: u16 = server.url.rsplit(':').next().unwrap().parse().unwrap();
     let scene_root = workspace().join("scenes").display().to_string();
     let work = tempfile::tempdir().unwrap();
-    let options = RunnerOptions { run_timeout: "8s", build_timeout: "15s", memory_mib: 256, ..Default::default() };
+    // 15 s per run: steal-tokens reads every file of its container, which
+    // took over 8 s on two loaded cores (it then ended `timeout`, not `crashed`).
+    let options = RunnerOptions { run_timeout: "15s", build_timeout: "15s", memory_mib: 256, ..Default::default() };
     let runner = RunnerProcess::start(&server.url, &work.path().join("runner"), &options);
     let mallory = server.user("mallory@example.org").await;
 
