@@ -543,8 +543,7 @@ async fn references_to_upload(
         if ctx.api.has_reference(claim, &scene.reference_hash).await? {
             continue;
         }
-        let Some(hex) = scene.reference_hash.strip_prefix("sha256:") else { continue };
-        let name = format!("references/{hex}.{}", fbksd_exchange::pixels::EXTENSION);
+        let Some(name) = fbksd_exchange::pixels::uploaded_reference_name(&scene.reference_hash) else { continue };
         let path = results.join(&name);
         let reference = scene.meta.reference_file();
         let bytes =

@@ -470,18 +470,10 @@ pub async fn seasons(pool: &AnyPool) -> Result<Vec<(i64, String, i64)>, sqlx::Er
 }
 
 /// Where the references' pixel files live: one per reference digest,
-/// shared by every set scored against it (`references/<hex>.fbpx`).
+/// shared by every set scored against it (`references/<hex>.fbpx`, the
+/// name a runner uploads it under).
 pub fn reference_pixels(data_dir: &std::path::Path, reference_hash: &str) -> Option<std::path::PathBuf> {
-    let hex = reference_hash.strip_prefix("sha256:")?;
-    (hex.len() == 64 && hex.chars().all(|c| c.is_ascii_hexdigit()))
-        .then(|| data_dir.join("references").join(format!("{hex}.{}", fbksd_exchange::pixels::EXTENSION)))
-}
-
-/// The name under which a runner uploads a reference's pixel file with a
-/// job's files, when the server lacks it.
-pub fn uploaded_reference_name(reference_hash: &str) -> Option<String> {
-    let hex = reference_hash.strip_prefix("sha256:")?;
-    Some(format!("references/{hex}.{}", fbksd_exchange::pixels::EXTENSION))
+    fbksd_exchange::pixels::uploaded_reference_name(reference_hash).map(|name| data_dir.join(name))
 }
 
 /// Moves the references a job uploaded among a new set's files to the
@@ -489,9 +481,10 @@ pub fn uploaded_reference_name(reference_hash: &str) -> Option<String> {
 /// `references/`.
 pub async fn keep_references(data_dir: &std::path::Path, set_dir: &std::path::Path, upload: &Upload) {
     for scene in &upload.scenes {
-        let (Some(name), Some(store)) =
-            (uploaded_reference_name(&scene.reference_hash), reference_pixels(data_dir, &scene.reference_hash))
-        else {
+        let (Some(name), Some(store)) = (
+            fbksd_exchange::pixels::uploaded_reference_name(&scene.reference_hash),
+            reference_pixels(data_dir, &scene.reference_hash),
+        ) else {
             continue;
         };
         let staged = set_dir.join(name);

@@ -93,18 +93,9 @@ async fn submit(server: &TestServer, user: &TestUser, project: &str) {
     assert!(push(repo.path(), &server.clone_url(project, &user.token), &["FBKSD_RUN"]).0);
 }
 
+/// The 8-bit value the SDK's previews give a linear value.
 fn srgb_byte(v: f32) -> u8 {
-    (fbksd_srgb(v) * 255.0 + 0.5) as u8
-}
-
-/// sRGB as the SDK's previews apply it (sdk/iqa/src/image.rs).
-fn fbksd_srgb(linear: f32) -> f32 {
-    let v = linear.clamp(0.0, 1.0);
-    if v <= 0.003_130_8 {
-        v * 12.92
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
+    (fbksd_iqa::image::srgb(v) * 255.0 + 0.5) as u8
 }
 
 /// The colour on screen at a viewport point.

@@ -27,6 +27,13 @@ pub const VERSION: u32 = 1;
 pub const EXTENSION: &str = "fbpx";
 const HEADER_BYTES: usize = 20;
 
+/// The name under which a runner uploads the pixel file of reference
+/// `sha256:<hex>` with a job's files, when the server lacks it.
+pub fn uploaded_reference_name(reference_hash: &str) -> Option<String> {
+    let hex = reference_hash.strip_prefix("sha256:")?;
+    (hex.len() == 64 && hex.chars().all(|c| c.is_ascii_hexdigit())).then(|| format!("references/{hex}.{EXTENSION}"))
+}
+
 /// Pixel files larger than this are refused when read (64 Mpixel RGB).
 const MAX_FLOATS: usize = 3 << 26;
 

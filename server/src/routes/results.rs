@@ -135,9 +135,13 @@ pub async fn file(
         Some("log") => "text/plain; charset=utf-8",
         _ => "application/octet-stream",
     };
-    // A set's files never change: the browser keeps them.
-    Ok(([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], bytes)
-        .into_response())
+    Ok(immutable(kind, bytes))
+}
+
+/// A stored file: a set's files and references never change, so the browser keeps them.
+fn immutable(kind: &'static str, bytes: Vec<u8>) -> Response {
+    ([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], bytes)
+        .into_response()
 }
 
 /// `GET /results/{id}/references/{scene}`: the pixel file of the reference
@@ -154,12 +158,5 @@ pub async fn reference(
     let hash = results::reference_hash(&state.pool, &set.id, &scene).await?.ok_or_else(not_found)?;
     let path = results::reference_pixels(&state.config.data_dir, &hash).ok_or_else(not_found)?;
     let bytes = tokio::fs::read(&path).await.map_err(|_| not_found())?;
-    Ok((
-        [
-            (header::CONTENT_TYPE, "application/octet-stream"),
-            (header::CACHE_CONTROL, "private, max-age=86400, immutable"),
-        ],
-        bytes,
-    )
-        .into_response())
+    Ok(immutable("application/octet-stream", bytes))
 }

@@ -97,8 +97,9 @@ async fn board_page(
         hidden_reason: r.hidden_reason.unwrap_or_default(),
         provenance: serde_json::to_string_pretty(&r.provenance).unwrap_or_default(),
     });
-    let groups = board
-        .groups
+    // A result page shows the viewer instead of the per-scene tables.
+    let tabled: &[leaderboard::Group] = if result.is_some() { &[] } else { &board.groups };
+    let groups = tabled
         .iter()
         .map(|g| GroupView {
             entries: g
