@@ -107,8 +107,31 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
     let page = ada.browser.get(&private).send().await.unwrap();
     assert_eq!(page.status(), 200);
     let page = page.text().await.unwrap();
-    assert!(page.contains("sphere") && page.contains("Box filter"), "the private page shows the run:\n{page}");
+    assert!(page.contains("Box filter"), "the private page names the technique:\n{page}");
     assert_eq!(reqwest::get(&private).await.unwrap().status(), 404, "and only to its owner");
+
+    // The page's viewer loads its document, which holds the run's image and
+    // the reference it was scored against, both fetchable by the owner.
+    let document = page
+        .split("data-document=\"")
+        .nth(1)
+        .and_then(|rest| rest.split('"').next())
+        .unwrap_or_else(|| panic!("the private page has no viewer:\n{page}"));
+    let viewer: serde_json::Value =
+        ada.browser.get(format!("{url}{document}")).send().await.unwrap().json().await.unwrap();
+    let scene = &viewer["scenes"][0];
+    assert_eq!(scene["name"], "sphere", "{viewer}");
+    let run = viewer["techniques"][0]["runs"]
+        .as_array()
+        .and_then(|runs| runs.iter().find(|run| run["spp"] == 4))
+        .unwrap_or_else(|| panic!("no run at 4 spp: {viewer}"));
+    assert_eq!(run["status"], "ok", "{viewer}");
+    for file in [&run["pixels"], &scene["reference"]] {
+        let file = file.as_str().unwrap_or_else(|| panic!("a pixel file is missing: {viewer}"));
+        let fetched = ada.browser.get(format!("{url}{file}")).send().await.unwrap();
+        assert_eq!(fetched.status(), 200, "{file}");
+        assert!(fetched.bytes().await.unwrap().len() > 20, "{file} is empty");
+    }
     eprintln!(
         "FIGURE serve.sh: answered {:.1} s after start; push (FBKSD_RUN) to private results {:.1} s",
         answered.as_secs_f64(),
