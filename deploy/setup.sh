@@ -7,6 +7,8 @@ set -euo pipefail
 APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3-venv
     # OpenCV headers: the thesis metric example A.3 is compiled by the tests.
     libopencv-core-dev libopencv-imgproc-dev libopencv-highgui-dev
+    # OpenEXR 3: the 2.x compatibility corpus (sdk/cpp/compat) builds against it.
+    libopenexr-dev
     # fbksd-server: TLS for SMTP; PostgreSQL for its tests (and deployments).
     libssl-dev postgresql git
     # A real browser for the page tests (the live job log, the results

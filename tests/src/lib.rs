@@ -121,3 +121,36 @@ pub fn python_path() -> PathBuf {
     }
     package.parent().unwrap().to_path_buf()
 }
+
+/// Installs the SDK as a user would (`deploy/install-sdk.sh`, once per
+/// `dir`) and builds the CMake project at `source` against it; returns the
+/// build directory.
+pub fn build_with_cmake(source: &Path, dir: &Path) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let prefix = dir.join("sdk");
+    if !prefix.join("lib/cmake/fbksd").is_dir() {
+        run(Command::new("bash").arg(root.join("deploy/install-sdk.sh")).arg(&prefix).arg(bin_dir()));
+    }
+    let name = source.file_name().unwrap().to_string_lossy();
+    let build = dir.join(format!("build-{name}"));
+    run(Command::new("cmake")
+        .arg("-S")
+        .arg(source)
+        .arg("-B")
+        .arg(&build)
+        .arg(format!("-DCMAKE_PREFIX_PATH={}", prefix.display())));
+    run(Command::new("cmake").arg("--build").arg(&build));
+    build
+}
+
+/// Runs a command; panics with its output unless it succeeds.
+pub fn run(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap_or_else(|e| panic!("{cmd:?}: {e}"));
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}

@@ -34,6 +34,17 @@ pub extern "C" fn fbksd_scene_info_copy(dst: *mut FbksdSceneInfo, src: *const Fb
     })
 }
 
+/// Adds every item of `src` to `dst`, replacing those with the same key
+/// (`SceneInfo::merged` of the C++ API).
+#[no_mangle]
+pub extern "C" fn fbksd_scene_info_merge(dst: *mut FbksdSceneInfo, src: *const FbksdSceneInfo) -> FbksdStatus {
+    guard(|| {
+        let merged = get(dst)?.merged(get(src)?);
+        handle(dst, "dst")?.0 = merged;
+        Ok(())
+    })
+}
+
 /// Frees a scene info made by [`fbksd_scene_info_new`] or
 /// [`fbksd_scene_info_clone`] (null is ignored; never a client's).
 #[no_mangle]

@@ -5,8 +5,13 @@
 // random_float.cpp. As printed, the consumer sums elements 0-2 of each
 // sample, which with this layout are IMAGE_X, IMAGE_Y and LENS_U, not the
 // colour (elements 7-9): the example runs, but its image is not the scene.
+// The listing uses IMAGE_X ... LIGHT_Y without declaring them; 2.x's client
+// header did not declare them either (they are the renderer's names), and
+// 2.x's own samplers defined these indices themselves, as done here.
 #include <fbksd/client/BenchmarkClient.h>
 using namespace fbksd;
+
+enum { IMAGE_X, IMAGE_Y, LENS_U, LENS_V, TIME, LIGHT_X, LIGHT_Y };
 
 // Function this sampler uses to generate random sample positions.
 float randomFloat();

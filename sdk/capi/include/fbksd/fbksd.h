@@ -504,6 +504,13 @@ enum FbksdStatus fbksd_scene_info_copy(struct FbksdSceneInfo *dst,
                                        const struct FbksdSceneInfo *src);
 
 /**
+ * Adds every item of `src` to `dst`, replacing those with the same key
+ * (`SceneInfo::merged` of the C++ API).
+ */
+enum FbksdStatus fbksd_scene_info_merge(struct FbksdSceneInfo *dst,
+                                        const struct FbksdSceneInfo *src);
+
+/**
  * Frees a scene info made by [`fbksd_scene_info_new`] or
  * [`fbksd_scene_info_clone`] (null is ignored; never a client's).
  */

@@ -1,50 +1,99 @@
-// The FBKSD 2.x C++ technique API (thesis appendix A.5), source-compatible,
-// as a header-only layer over the C ABI (<fbksd/fbksd.h>, libfbksd).
+// The FBKSD 2.x C++ technique API (thesis appendix A.5, and the rest of the
+// 2.x client surface: the tile iterator, the point accessor, SPP's
+// setters), source-compatible, as a header-only layer over the C ABI
+// (<fbksd/fbksd.h>, libfbksd).
 //
-// Differences a user may notice: errors throw fbksd::Error (a
+// Differences a user may notice: errors throw fbksd::sdk::Error (a
 // std::runtime_error carrying the C status and message) instead of
 // aborting; an exception thrown by a callback stops delivering tiles and is
-// rethrown from the evaluate call once the request is over.
+// rethrown from the evaluate call once the request is over. Like 2.x, this
+// header declares no RandomParameter or Feature names (IMAGE_X, COLOR_R,
+// DEPTH, ...): techniques index samples with their own.
 #pragma once
 
 #include <fbksd/core/SampleLayout.h>
 #include <fbksd/core/SceneInfo.h>
 #include <fbksd/core/definitions.h>
-
-#include <cstdint>
-#include <exception>
-#include <functional>
-#include <string>
-#include <utility>
+#include <fbksd/core/sdk.h>
 
 namespace fbksd {
 
 //! A number of samples per pixel.
-struct SPP {
+class SPP {
+public:
     explicit SPP(int64_t value) : value(value) {}
+    int64_t operator=(int64_t v) { return value = v; }
+    void setValue(int64_t v) { value = v; }
+    int64_t getValue() const { return value; }
+
     int64_t value;
 };
 
-//! A tile of samples: pixels [beginX, endX) × [beginY, endY), `tile(x, y, s)` is sample s of pixel (x, y).
+//! A tile of samples: pixels [beginX, endX) x [beginY, endY), spp samples
+//! each; `tile(x, y, s)` is sample s of pixel (x, y), and iterating the tile
+//! visits every sample in storage order (`for (const auto sample : tile)`).
 class BufferTile {
 public:
+    //! Walks a tile's samples in storage order; `*it` is one sample's floats.
+    class SampleIterator {
+    public:
+        using iterator_category = std::forward_iterator_tag;
+        using value_type = const float*;
+        using difference_type = std::ptrdiff_t;
+        using pointer = const float* const*;
+        using reference = const float*;
+
+        SampleIterator(const float* at, size_t stride) : m_at(at), m_stride(stride) {}
+        const float* operator*() const { return m_at; }
+        SampleIterator& operator++() {
+            m_at += m_stride;
+            return *this;
+        }
+        SampleIterator operator++(int) {
+            SampleIterator before = *this;
+            ++*this;
+            return before;
+        }
+        bool operator==(const SampleIterator& o) const { return m_at == o.m_at; }
+        bool operator!=(const SampleIterator& o) const { return m_at != o.m_at; }
+
+    private:
+        const float* m_at;
+        size_t m_stride;
+    };
+
     explicit BufferTile(const FbksdTile* tile) : m_tile(tile) {}
     int64_t beginX() const { return m_tile->begin_x; }
     int64_t endX() const { return m_tile->end_x; }
     int64_t beginY() const { return m_tile->begin_y; }
     int64_t endY() const { return m_tile->end_y; }
+    int64_t width() const { return endX() - beginX(); }
+    int64_t height() const { return endY() - beginY(); }
+    int64_t numPixels() const { return width() * height(); }
     //! Samples per pixel in this tile.
+    int64_t getSPP() const { return m_tile->spp; }
     int64_t spp() const { return m_tile->spp; }
+    //! Floats per sample (the layout's size).
+    int64_t getSampleSize() const { return (int64_t)m_tile->sample_size; }
     //! Number of samples in this tile.
     int64_t size() const { return (int64_t)m_tile->count; }
+
     //! Sample `s` of pixel (x, y).
     float* operator()(int64_t x, int64_t y, int64_t s) const {
-        size_t width = m_tile->end_x - m_tile->begin_x;
-        size_t index = ((size_t)(y - m_tile->begin_y) * width + (size_t)(x - m_tile->begin_x)) * m_tile->spp + (size_t)s;
+        size_t index = ((size_t)(y - beginY()) * (size_t)width() + (size_t)(x - beginX())) * m_tile->spp + (size_t)s;
         return m_tile->data + index * m_tile->sample_size;
+    }
+    //! Sample `s` of the pixel at `p`, any point type with `.x` and `.y`.
+    template<typename T> float* operator()(const T& p, int64_t s) const {
+        return (*this)((int64_t)p.x, (int64_t)p.y, s);
     }
     //! Sample `i` in storage order.
     float* operator[](int64_t i) const { return m_tile->data + (size_t)i * m_tile->sample_size; }
+
+    SampleIterator begin() const { return SampleIterator(m_tile->data, m_tile->sample_size); }
+    SampleIterator end() const {
+        return SampleIterator(m_tile->data + (size_t)m_tile->count * m_tile->sample_size, m_tile->sample_size);
+    }
 
 private:
     const FbksdTile* m_tile;
@@ -60,10 +109,15 @@ public:
 
     //! Connects; with argc/argv, the debug options --fbksd-renderer and --fbksd-spp work.
     BenchmarkClient(int argc = 0, char* argv[] = nullptr) {
-        detail::check(fbksd_client_new(argc, (const char* const*)argv, &m_client));
+        sdk::check(fbksd_client_new(argc, (const char* const*)argv, &m_client));
     }
     BenchmarkClient(const BenchmarkClient&) = delete;
     BenchmarkClient(BenchmarkClient&& o) noexcept : m_client(o.m_client) { o.m_client = nullptr; }
+    BenchmarkClient& operator=(const BenchmarkClient&) = delete;
+    BenchmarkClient& operator=(BenchmarkClient&& o) noexcept {
+        std::swap(m_client, o.m_client);
+        return *this;
+    }
     ~BenchmarkClient() { fbksd_client_free(m_client); }
 
     SceneInfo getSceneInfo() { return SceneInfo(fbksd_client_scene_info(m_client)); }
@@ -81,7 +135,7 @@ public:
         if (status == FBKSD_STATUS_OK)
             status = fbksd_client_set_layout(m_client, l);
         fbksd_layout_free(l);
-        detail::check(status);
+        sdk::check(status);
     }
 
     //! The result image (width × height × RGB, scan-line order); owned by the client.
@@ -89,7 +143,7 @@ public:
         size_t len = 0;
         float* buffer = fbksd_client_result_buffer(m_client, &len);
         if (!buffer)
-            throw Error(FBKSD_STATUS_USAGE, fbksd_last_error());
+            throw sdk::Error(FBKSD_STATUS_USAGE, fbksd_last_error());
         return buffer;
     }
 
@@ -122,7 +176,7 @@ public:
     }
 
     //! Sends the result buffer; nothing more can be requested afterwards.
-    void sendResult() { detail::check(fbksd_client_send_result(m_client)); }
+    void sendResult() { sdk::check(fbksd_client_send_result(m_client)); }
 
 private:
     struct Callbacks {
@@ -162,7 +216,7 @@ private:
     static void finish(Callbacks& c, FbksdStatus status) {
         if (c.error)
             std::rethrow_exception(c.error);
-        detail::check(status);
+        sdk::check(status);
     }
 
     FbksdClient* m_client = nullptr;

@@ -2,10 +2,7 @@
 // and which random parameters the technique writes itself (INPUT).
 #pragma once
 
-#include <fbksd/core/definitions.h>
-
-#include <string>
-#include <vector>
+#include <fbksd/core/sdk.h>
 
 namespace fbksd {
 
@@ -20,7 +17,7 @@ public:
         size_t n = fbksd_layout_len(layout);
         for (size_t i = 0; i < n; ++i) {
             FbksdElement e;
-            detail::check(fbksd_layout_element(layout, i, &e));
+            sdk::check(fbksd_layout_element(layout, i, &e));
             m_elements.push_back(Element{e.name, e.input ? INPUT : OUTPUT, (int)e.number});
         }
         m_roughness = fbksd_layout_roughness_threshold(layout);
@@ -73,6 +70,16 @@ public:
     //! Beckmann roughness threshold of the DIFFUSE_COLOR features (default 0.1).
     void setRoughnessThreshold(float a) { m_roughness = a; }
     float getRoughnessThreshold() const { return m_roughness; }
+
+    //! Whether every element is one of `names` (the elements a renderer
+    //! supports) and no element appears twice with the same number.
+    bool isValid(const std::set<std::string>& names) const {
+        std::set<std::pair<std::string, int>> seen;
+        for (const auto& e : m_elements)
+            if (!names.count(e.name) || !seen.insert({e.name, e.number}).second)
+                return false;
+        return true;
+    }
 
     struct Element {
         std::string name;

@@ -2,13 +2,7 @@
 // …). Techniques read it from their client; renderers build one with set().
 #pragma once
 
-#include <fbksd/core/definitions.h>
-
-#include <cstdio>
-#include <string>
-#include <type_traits>
-#include <utility>
-#include <vector>
+#include <fbksd/core/sdk.h>
 
 namespace fbksd {
 
@@ -35,6 +29,13 @@ public:
     //! Sets the info `name` (integers, floating point, bool, strings).
     template<typename T> void set(const std::string& name, const T& value) { put(name, value); }
 
+    //! This info with every item of `scene` added; `scene`'s win on equal keys.
+    SceneInfo merged(const SceneInfo& scene) const {
+        SceneInfo out(*this);
+        sdk::check(fbksd_scene_info_merge(out.m_info, scene.m_info));
+        return out;
+    }
+
     //! The C API's handle (owned by this object).
     const FbksdSceneInfo* handle() const { return m_info; }
     FbksdSceneInfo* handle() { return m_info; }
@@ -42,17 +43,17 @@ public:
 private:
     template<typename T> void put(const std::string& name, const T& value) {
         if (std::is_same<T, bool>::value)
-            detail::check(fbksd_scene_info_set_bool(m_info, name.c_str(), value != T()));
+            sdk::check(fbksd_scene_info_set_bool(m_info, name.c_str(), value != T()));
         else if (std::is_integral<T>::value)
-            detail::check(fbksd_scene_info_set_int(m_info, name.c_str(), (int64_t)value));
+            sdk::check(fbksd_scene_info_set_int(m_info, name.c_str(), (int64_t)value));
         else
-            detail::check(fbksd_scene_info_set_float(m_info, name.c_str(), (double)value));
+            sdk::check(fbksd_scene_info_set_float(m_info, name.c_str(), (double)value));
     }
     void put(const std::string& name, const std::string& value) {
-        detail::check(fbksd_scene_info_set_string(m_info, name.c_str(), value.c_str()));
+        sdk::check(fbksd_scene_info_set_string(m_info, name.c_str(), value.c_str()));
     }
     void put(const std::string& name, const char* value) {
-        detail::check(fbksd_scene_info_set_string(m_info, name.c_str(), value));
+        sdk::check(fbksd_scene_info_set_string(m_info, name.c_str(), value));
     }
 
     template<typename T, typename F> T fetch(const std::string& name, F read) const {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <fbksd/core/definitions.h>
+#include <fbksd/core/sdk.h>
 
 #include <algorithm>
 #include <cmath>
@@ -85,11 +86,11 @@ private:
 class IQA {
 public:
     //! Parses the command line (answering --help and --info itself) and
-    //! reads both images; throws fbksd::Error (a std::runtime_error) if they
+    //! reads both images; throws fbksd::sdk::Error (a std::runtime_error) if they
     //! cannot be read or differ in size.
     IQA(int argc, char const* const* argv, const std::string& acronym, const std::string& fullName,
         const std::string& reference, bool lowerIsBetter, bool hasErrorMap) {
-        detail::check(fbksd_iqa_new(argc, argv, acronym.c_str(), fullName.c_str(), reference.c_str(), lowerIsBetter,
+        sdk::check(fbksd_iqa_new(argc, argv, acronym.c_str(), fullName.c_str(), reference.c_str(), lowerIsBetter,
                                     hasErrorMap, &m_iqa));
     }
     IQA(const IQA&) = delete;
@@ -102,10 +103,10 @@ public:
         testImg = image(FBKSD_IQA_IMAGE_TEST);
     }
     //! Reports the value (metrics without an error map).
-    void report(float value) { detail::check(fbksd_iqa_report(m_iqa, value, nullptr, 0, 0)); }
+    void report(float value) { sdk::check(fbksd_iqa_report(m_iqa, value, nullptr, 0, 0)); }
     //! Reports the value and the error map (values in [0, 1), larger is worse).
     void report(float value, const Img& errorMap) {
-        detail::check(fbksd_iqa_report(m_iqa, value, errorMap.data(), (uint32_t)errorMap.width(),
+        sdk::check(fbksd_iqa_report(m_iqa, value, errorMap.data(), (uint32_t)errorMap.width(),
                                        (uint32_t)errorMap.height()));
     }
 
@@ -114,7 +115,7 @@ private:
         uint32_t width = 0, height = 0;
         const float* data = fbksd_iqa_image(m_iqa, which, &width, &height);
         if (!data)
-            throw Error(FBKSD_STATUS_INVALID_ARGUMENT, fbksd_last_error());
+            throw sdk::Error(FBKSD_STATUS_INVALID_ARGUMENT, fbksd_last_error());
         return Img((int)width, (int)height, data);
     }
 

@@ -11,6 +11,7 @@
 #include <fbksd/core/SampleLayout.h>
 #include <fbksd/core/SceneInfo.h>
 #include <fbksd/core/definitions.h>
+#include <fbksd/core/sdk.h>
 #include <fbksd/renderer/samples.h>
 
 #include <cstdint>
@@ -50,7 +51,7 @@ public:
     //! Called when FBKSD has no more work, before run() returns.
     void onFinish(const Finish& callback) { m_finish = callback; }
 
-    //! Serves FBKSD until it is done; throws fbksd::Error if the renderer
+    //! Serves FBKSD until it is done; throws fbksd::sdk::Error if the renderer
     //! was not started by FBKSD or the connection fails.
     void run() {
         FbksdServerCallbacks c{};
@@ -61,7 +62,7 @@ public:
         c.evaluate_samples = &evaluate;
         c.last_tile_consumed = m_lastTile ? &lastTile : nullptr;
         c.finish = m_finish ? &finish : nullptr;
-        detail::check(fbksd_server_run(&c));
+        sdk::check(fbksd_server_run(&c));
     }
 
 private:
@@ -88,7 +89,7 @@ private:
             if (!self->m_sceneInfo)
                 throw std::runtime_error("no onGetSceneInfo callback");
             SceneInfo info = self->m_sceneInfo();
-            detail::check(fbksd_scene_info_copy(out, info.handle()));
+            sdk::check(fbksd_scene_info_copy(out, info.handle()));
         });
     }
     static FbksdStatus setParameters(void* user, const FbksdLayout* layout) {

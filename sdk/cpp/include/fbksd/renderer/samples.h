@@ -10,10 +10,30 @@
 #pragma once
 
 #include <fbksd/core/definitions.h>
-
-#include <cstring>
+#include <fbksd/core/sdk.h>
 
 namespace fbksd {
+
+//! Random parameters; with them first in the layout, in this order, they
+//! also index a sample (`sample[IMAGE_X]`), as in the original examples.
+//! Renderer-side only, as in 2.x: techniques declare their own.
+enum RandomParameter { IMAGE_X = 0, IMAGE_Y, LENS_U, LENS_V, TIME, LIGHT_X, LIGHT_Y, NUM_RANDOM_PARAMETERS };
+
+//! Features a renderer computes. Numbered ones (WORLD, NORMAL,
+//! TEXTURE_COLOR) also exist for the second intersection (number 1).
+enum Feature {
+    COLOR_R = 0, COLOR_G, COLOR_B,
+    DIRECT_LIGHT_R, DIRECT_LIGHT_G, DIRECT_LIGHT_B,
+    DEPTH,
+    WORLD_X, WORLD_Y, WORLD_Z,
+    NORMAL_X, NORMAL_Y, NORMAL_Z,
+    TEXTURE_COLOR_R, TEXTURE_COLOR_G, TEXTURE_COLOR_B,
+    WORLD_X_NS, WORLD_Y_NS, WORLD_Z_NS,
+    NORMAL_X_NS, NORMAL_Y_NS, NORMAL_Z_NS,
+    TEXTURE_COLOR_R_NS, TEXTURE_COLOR_G_NS, TEXTURE_COLOR_B_NS,
+    DIFFUSE_COLOR_R, DIFFUSE_COLOR_G, DIFFUSE_COLOR_B,
+    NUM_FEATURES
+};
 
 //! One sample: writes go straight into the pipe's shared memory.
 class SampleBuffer {
@@ -75,11 +95,11 @@ public:
     //! Acquires a pipe for `numSamples` samples of the window [begin, end):
     //! `area × spp` samples make a pixel tile, anything else pixel-free
     //! samples (the original passed the whole image for those). Blocks until
-    //! a slot is free; throws fbksd::Error when no request is in progress.
+    //! a slot is free; throws fbksd::sdk::Error when no request is in progress.
     SamplesPipe(const Point2l& begin, const Point2l& end, int64_t numSamples) {
-        detail::check(fbksd_pipe_open(begin.x, begin.y, end.x, end.y, numSamples, &m_pipe));
-        detail::check(fbksd_pipe_tile(m_pipe, &m_tile));
-        detail::check(fbksd_pipe_sample_map(m_pipe, &m_map));
+        sdk::check(fbksd_pipe_open(begin.x, begin.y, end.x, end.y, numSamples, &m_pipe));
+        sdk::check(fbksd_pipe_tile(m_pipe, &m_tile));
+        sdk::check(fbksd_pipe_sample_map(m_pipe, &m_map));
     }
     SamplesPipe(const SamplesPipe&) = delete;
     SamplesPipe& operator=(const SamplesPipe&) = delete;
