@@ -2,8 +2,11 @@
 # Builds the images fbksd-ci runs jobs in, with no registry:
 #   base      Debian 12 (minbase) from this machine's Debian apt sources:
 #             mmdebstrap, then docker import (only when it is not there yet)
-#   cpp       base + gcc, CMake and the FBKSD C/C++ SDK
-#   python    base + Python 3, numpy and the FBKSD Python SDK
+#   cpp       base + gcc, CMake, the FBKSD C/C++ SDK and research libraries
+#             (OpenEXR, Eigen, OpenCV, FFTW, Boost, TBB; OpenMP with gcc)
+#   python    base + Python 3, the FBKSD Python SDK, numpy, scipy, OpenEXR
+#             and pyoidn (wheels pinned in deploy/images/python/requirements.txt,
+#             downloaded here on the host and cached in ~/.cache/fbksd/wheels)
 #   renderer  base + the built-in renderers and the scene files (no references)
 # Each tag is a hash of the image's content (its Dockerfile, the files it
 # copies and its base), so an unchanged image is never rebuilt. The
@@ -59,7 +62,17 @@ stage_cpp() {
     bash deploy/install-sdk.sh "$1/sdk" "$bin_dir" >/dev/null
 }
 stage_python() {
-    mkdir -p "$1/fbksd"
+    local wheels=${XDG_CACHE_HOME:-$HOME/.cache}/fbksd/wheels
+    mkdir -p "$1/fbksd" "$1/wheels" "$wheels"
+    cp deploy/images/python/requirements.txt "$1/"
+    # Only what requirements.txt names, so a stale cached wheel never changes the image.
+    python3 -m pip download --quiet --disable-pip-version-check --only-binary=:all: \
+        --dest "$wheels" -r deploy/images/python/requirements.txt >&2
+    grep -E '^[A-Za-z]' deploy/images/python/requirements.txt | while IFS='=' read -r name _ version; do
+        file=$(ls "$wheels" | grep -i "^$(echo "$name" | tr '-' '_')-$version-" | head -1)
+        [ -n "$file" ] || { say "no wheel for $name $version in $wheels"; exit 1; }
+        cp "$wheels/$file" "$1/wheels/"
+    done
     cp sdk/python/python/fbksd/*.py sdk/python/python/fbksd/*.pyi sdk/python/python/fbksd/py.typed "$1/fbksd/"
     cp "$bin_dir/lib_native.so" "$1/fbksd/_native.so"
 }
@@ -80,11 +93,13 @@ for name in cpp python renderer; do
     tag=fbksd-$name:$hash
     if ! docker image inspect "$tag" >/dev/null 2>&1; then
         say "building $tag"
+        started=$SECONDS
         if ! docker build --quiet --network host --build-arg "BASE=$base" -t "$tag" "$ctx" >"$stage/$name.log" 2>&1; then
             cat "$stage/$name.log" >&2
             say "building $tag failed"
             exit 1
         fi
+        say "built $tag in $((SECONDS - started)) s ($(docker image inspect --format '{{.Size}}' "$tag" | awk '{printf "%.0f MB", $1 / 1e6}'))"
     fi
     tags[$name]=$tag
 done

@@ -245,6 +245,29 @@ struct Install {
 /// Where a technique's files are mounted in its container.
 const TECHNIQUE_MOUNT: &str = "/technique";
 
+/// The python environment's build: each script's syntax, and that every
+/// module it imports at its top level is there (so a missing one fails the
+/// build, with the environment's hint, instead of every run).
+const PYTHON_CHECK: &str = "\
+import ast, importlib.util, os, sys
+def present(module):
+    try:
+        return importlib.util.find_spec(module) is not None
+    except Exception:
+        return True
+for path in sys.argv[1:]:
+    tree = ast.parse(open(path, 'rb').read(), path)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(path)))  # as when the script runs
+    for node in tree.body:
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else \\
+            [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else []
+        for top in {name.split('.')[0] for name in names}:
+            if not present(top):
+                sys.exit(f\"{path}:{node.lineno}: ModuleNotFoundError: No module named '{top}'\")
+    sys.path.pop(0)
+import fbksd.client
+print('syntax and imports of', ', '.join(sys.argv[1:]), 'checked')";
+
 /// Builds the technique in a sandbox; returns the directory its executables are in.
 async fn build(
     ctx: &JobContext,
@@ -281,11 +304,7 @@ async fn build(
             (spec, Install { host: build })
         }
         Environment::Python => {
-            let mut cmd = vec![
-                "python3".to_string(),
-                "-c".to_string(),
-                "import ast, sys\nfor path in sys.argv[1:]:\n    ast.parse(open(path, 'rb').read(), path)\nimport fbksd.client\nprint('syntax of', ', '.join(sys.argv[1:]), 'checked; fbksd', fbksd.__version__ if hasattr(fbksd, '__version__') else '', 'imported')".to_string(),
-            ];
+            let mut cmd = vec!["python3".to_string(), "-c".to_string(), PYTHON_CHECK.to_string()];
             cmd.extend(info.versions.iter().map(|v| v.executable.clone()));
             let spec = ContainerSpec {
                 image,
@@ -299,6 +318,12 @@ async fn build(
             (spec, Install { host: src.to_path_buf() })
         }
     };
+    log.line(format!(
+        "[fbksd-ci] environment {} ({}): {}",
+        info.environment.as_str(),
+        spec.image,
+        info.environment.summary()
+    ));
     log.line(format!("[fbksd-ci] build: {}", spec.cmd.join(" ").lines().next().unwrap_or("")));
     // The start of the output (where the first compiler error usually is) and its end.
     let (head, tail) = (Arc::new(Mutex::new(Vec::<u8>::new())), Arc::new(Mutex::new(Vec::<u8>::new())));
@@ -340,9 +365,15 @@ async fn build(
         ContainerEnd { exit_code: 0, .. } => {}
         ContainerEnd { exit_code, .. } => {
             let first = first_error.map(|line| format!(" {line}")).unwrap_or_default();
+            let output = format!("{}\n{tail}", String::from_utf8_lossy(&head.lock().unwrap()));
+            let hint = info.environment.explain_missing(&output).map(|h| format!("\n\n{h}")).unwrap_or_default();
             return Err(Failure::new(
                 FailureReason::BuildFailed,
-                format!("the build failed (exit code {exit_code}):{first}\n\nlast lines of the build:\n{tail}"),
+                format!(
+                    "the build failed in the {} environment (exit code {exit_code}):{first}{hint}\n\n\
+                     last lines of the build:\n{tail}",
+                    info.environment.as_str()
+                ),
             ));
         }
     }

@@ -1,14 +1,18 @@
 //! The whole flow with real Docker, real git, the real server and the real
 //! `fbksd-ci`: push the Python box filter → build job succeeds → FBKSD_RUN →
 //! private results URL in the job log → metrics for every scene and spp →
-//! FBKSD_PUBLISH → the public leaderboard lists it. Prints the
-//! push-to-results times (see the README). The C++ box filter takes the
-//! same path through `deploy/serve.sh` itself (`serve_sh.rs`).
+//! FBKSD_PUBLISH → the public leaderboard lists it. Then techniques written
+//! for FBKSD 2.x (`sdk/cpp/compat`), pushed unchanged, build in the cpp
+//! environment and make the images they must, and a build that misses a
+//! header says which environment has it. Prints the push-to-results times
+//! (see the README). The C++ box filter takes the same path through
+//! `deploy/serve.sh` itself (`serve_sh.rs`).
 
 mod common;
 
 use common::*;
 use reqwest::Method;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -20,6 +24,8 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
     let options = RunnerOptions { scenes: CI_SCENES, spp: "1,4", ..Default::default() };
     let runner = RunnerProcess::start(&server.url, &work.path().join("runner"), &options);
     let ada = server.user("ada@example.org").await;
+    // The Python box filter's images, by (scene, spp), for the 2.x box filters below.
+    let mut box_filter = BTreeMap::new();
 
     for name in ["box-filter-python"] {
         server.create_project(&ada, name, "private").await;
@@ -114,6 +120,11 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
             assert!(run["error_maps"]["MSE"].is_string() && run["log"].is_string(), "{run}");
             assert!(run["wall_ms"].as_f64().unwrap() > 0.0 && run["peak_memory_bytes"].as_u64().unwrap() > 0, "{run}");
         }
+        for run in doc["techniques"][0]["runs"].as_array().unwrap() {
+            let pixels = pixels_of(run["pixels"].as_str().unwrap().into()).await;
+            box_filter
+                .insert((run["scene"].as_str().unwrap().to_string(), run["spp"].as_u64().unwrap()), pixels.values);
+        }
 
         // FBKSD_PUBLISH puts it on the public leaderboard.
         commit_all(repo.path(), "publish");
@@ -122,6 +133,74 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
         let board = reqwest::get(format!("{}/results/", server.url)).await.unwrap().text().await.unwrap();
         assert!(board.contains(name), "the leaderboard does not list {name}");
     }
+
+    // Techniques written for FBKSD 2.x, pushed unchanged: each builds in the
+    // cpp environment and benchmarks; the box filters make the Python box
+    // filter's images (one through a half-float EXR), the sampler finite ones.
+    for name in ["iterating-box", "openexr-omp-box", "centre-sampler"] {
+        server.create_project(&ada, name, "private").await;
+        let repo = sdk_repository(&format!("cpp/compat/{name}"));
+        let (pushed, output) = push(repo.path(), &server.clone_url(name, &ada.token), &["FBKSD_RUN"]);
+        assert!(pushed, "{output}");
+        let bench = newest_job(&server, &ada, name, "benchmark").await;
+        let job = finished_job(&server, &ada, &bench, Duration::from_secs(900)).await;
+        let log = log_text(&server, &ada, &bench).await;
+        assert_eq!(job["state"], "succeeded", "{name}: {job}\n{log}\nrunner:\n{}", runner.output());
+        assert!(log.contains("[fbksd-ci] environment cpp (") && log.contains("OpenEXR 3.1.5"), "{log}");
+        let uuid = private_results_url(&log).rsplit('/').next().unwrap().to_string();
+        let viewer = format!("{}/api/v1/results/{uuid}/viewer", server.url);
+        let (status, doc) = json_of(ada.api(Method::GET, viewer).send().await.unwrap()).await;
+        assert_eq!(status, 200, "{doc}");
+        let own = doc["techniques"].as_array().unwrap().iter().find(|t| t["key"] == doc["highlight"]).unwrap();
+        let runs = own["runs"].as_array().unwrap();
+        assert_eq!(runs.len(), box_filter.len(), "{name}: every scene and spp ran: {own}");
+        for run in runs {
+            assert_eq!(run["status"], "ok", "{name}: {run}");
+            let key = (run["scene"].as_str().unwrap().to_string(), run["spp"].as_u64().unwrap());
+            let address = run["pixels"].as_str().unwrap_or_else(|| panic!("{run}"));
+            let bytes = ada.api(Method::GET, format!("{}{address}", server.url)).send().await.unwrap();
+            let values = fbksd_exchange::pixels::decode(&bytes.bytes().await.unwrap()).unwrap().values;
+            let tolerance = match name {
+                "iterating-box" => 1e-5,
+                "openexr-omp-box" => 1.0 / 1024.0,
+                _ => {
+                    assert!(values.iter().all(|v| v.is_finite()), "{name} {key:?}");
+                    continue;
+                }
+            };
+            let want = &box_filter[&key];
+            assert_eq!(values.len(), want.len(), "{name} {key:?}");
+            for (i, (got, want)) in values.iter().zip(want).enumerate() {
+                assert!(
+                    (got - want).abs() <= tolerance * want.abs().max(1e-3),
+                    "{name} {key:?} value {i}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
+    // A build that misses a header: its message names the environment and
+    // the one that has what was missing.
+    server.create_project(&ada, "needs-oidn", "private").await;
+    let repo = repository_with(&[
+        (
+            "info.json",
+            r#"{"short_name": "needs-oidn", "technique_type": "denoiser", "versions": [{"name": "default", "executable": "needs-oidn"}]}"#,
+        ),
+        ("CMakeLists.txt", "cmake_minimum_required(VERSION 3.16)\nproject(needs-oidn CXX)\nfind_package(fbksd REQUIRED)\nadd_executable(needs-oidn main.cpp)\ntarget_link_libraries(needs-oidn fbksd::client)\n"),
+        ("main.cpp", "#include <fbksd/client/BenchmarkClient.h>\n#include <OpenImageDenoise/oidn.hpp>\nint main() { return 0; }\n"),
+    ]);
+    let (pushed, output) = push(repo.path(), &server.clone_url("needs-oidn", &ada.token), &[]);
+    assert!(pushed, "{output}");
+    let build = newest_job(&server, &ada, "needs-oidn", "build").await;
+    let job = finished_job(&server, &ada, &build, Duration::from_secs(300)).await;
+    assert_eq!(job["failure_reason"], "build_failed", "{job}");
+    let message = job["message"].as_str().unwrap();
+    assert!(message.contains("the build failed in the cpp environment"), "{message}");
+    assert!(
+        message.contains("header `OpenImageDenoise/oidn.hpp` is not in the cpp environment. The python environment has Intel Open Image Denoise"),
+        "{message}"
+    );
 
     // Nothing is left behind.
     let id = runner.id().unwrap();

@@ -295,6 +295,32 @@ on_both_databases!(a_running_jobs_log_streams_live_to_a_real_browser, |db: Db| a
     assert!(dom.contains("class=\"state-succeeded\""), "the end event updates the state: {dom}");
 });
 
+on_both_databases!(the_environments_page_lists_what_each_image_holds, |db: Db| async move {
+    let server = spawn(db).await;
+    let (status, page) = text(reqwest::get(format!("{}/environments", server.url)).await.unwrap()).await;
+    assert_eq!(status, 200);
+    for shown in [
+        "<h2 id=\"cpp\">",
+        "<h2 id=\"python\">",
+        "OpenEXR",
+        "3.1.5",
+        "Eigen",
+        "OpenCV",
+        "FFTW",
+        "Boost",
+        "oneTBB",
+        "omp.h",
+        "Intel Open Image Denoise",
+        "pyoidn",
+        "scipy",
+    ] {
+        assert!(page.contains(shown), "{shown} is not on the page:\n{page}");
+    }
+    // Every page links to it.
+    let (_, home) = text(reqwest::get(&server.url).await.unwrap()).await;
+    assert!(home.contains("<a href=\"/environments\">"), "{home}");
+});
+
 fn which(program: &str) -> bool {
     std::process::Command::new("sh")
         .args(["-c", &format!("command -v {program}")])

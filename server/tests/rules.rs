@@ -57,6 +57,20 @@ on_both_databases!(a_broken_repository_fails_its_build_at_once_and_mails_the_aut
     assert_eq!(jobs_of(&server, &ada, "broken").await.len(), 2);
     assert_eq!(server.mails_to("ada@example.org").iter().filter(|m| m.contains("failed")).count(), 2);
     assert!(runner.claim(0).await.is_none());
+
+    // An environment the service does not have: the push's answer says so
+    // and lists the ones it has, with where to read their contents.
+    std::fs::write(
+        repo.path().join("info.json"),
+        r#"{"short_name": "broken", "technique_type": "denoiser", "environment": "cuda"}"#,
+    )
+    .unwrap();
+    common::commit_all(repo.path(), "cuda");
+    let (pushed, output) = push(repo.path(), &server.clone_url("broken", &ada.token), &[]);
+    assert!(pushed, "{output}");
+    assert!(output.contains("failed: info.json line 1: \"environment\" \"cuda\" is unknown: use \"cpp\" (CMake, gcc and C++ libraries) or \"python\""), "{output}");
+    assert!(output.contains("/environments"), "{output}");
+    assert!(runner.claim(0).await.is_none());
 });
 
 on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is_written, |db: Db| async move {

@@ -11,12 +11,14 @@
 //! - [`results`]: the results directory's layout, its file names and index.
 //! - [`scenes`]: scene metadata, scene digests and the reference-cache rule.
 //! - [`technique`]: a technique repository's `info.json`.
+//! - [`environments`]: what each environment a technique builds in holds.
 //! - [`ranking`]: techniques ranked by mean rank over the index.
 //! - [`runner_api`]: the messages of the runner API, job kinds and states.
 //! - [`pixels`]: the viewer's pixel files (exact floats, small on the wire).
 //! - [`viewer`]: the results viewer's document.
 #![deny(missing_docs)]
 
+pub mod environments;
 pub mod pixels;
 pub mod ranking;
 pub mod record;

@@ -157,8 +157,9 @@ impl TechniqueInfo {
             Some("python") => Environment::Python,
             Some(other) => {
                 return Err(format!(
-                    "{}: \"environment\" {other:?} is unknown: use \"cpp\" or \"python\"",
-                    at("environment")
+                    "{}: \"environment\" {other:?} is unknown: use {} (their contents: /environments)",
+                    at("environment"),
+                    Environment::choices()
                 ))
             }
             None if has("CMakeLists.txt") => Environment::Cpp,

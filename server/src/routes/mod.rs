@@ -96,6 +96,7 @@ pub fn router(state: AppState) -> Router {
         .route("/settings/tokens", post(pages::create_token))
         .route("/settings/tokens/{id}/revoke", post(pages::revoke_token))
         .route("/projects", get(pages::projects_page).post(pages::create_project))
+        .route("/environments", get(pages::environments_page))
         .route("/projects/{name}", get(pages::project_page))
         .route("/projects/{name}/run", post(pages::run_project))
         .route("/jobs/{id}", get(pages::job_page))

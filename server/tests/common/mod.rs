@@ -237,8 +237,14 @@ pub fn git(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
 /// A local repository holding the SDK's example technique `name`
 /// (`sdk/techniques/<name>`), committed on `main`.
 pub fn technique_repository(name: &str) -> tempfile::TempDir {
+    sdk_repository(&format!("techniques/{name}"))
+}
+
+/// A git repository holding a copy of the SDK folder `sdk/<path>` (one
+/// level of files), committed on `main`.
+pub fn sdk_repository(path: &str) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    let source = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk/techniques").join(name);
+    let source = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../sdk").join(path);
     for entry in std::fs::read_dir(&source).unwrap() {
         let entry = entry.unwrap();
         std::fs::copy(entry.path(), dir.path().join(entry.file_name())).unwrap();

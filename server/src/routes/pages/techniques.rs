@@ -25,6 +25,46 @@ pub async fn projects_page(State(state): State<AppState>, Visitor(nav): Visitor)
     Ok(render(&ProjectsPage { nav, projects }))
 }
 
+struct EnvironmentView {
+    name: &'static str,
+    packages: Vec<PackageView>,
+}
+
+struct PackageView {
+    name: &'static str,
+    version: &'static str,
+    what: &'static str,
+    provides: String,
+}
+
+#[derive(Template)]
+#[template(path = "environments.html")]
+struct EnvironmentsPage {
+    nav: Nav,
+    environments: Vec<EnvironmentView>,
+}
+
+/// `GET /environments`: what each build environment holds.
+pub async fn environments_page(Visitor(nav): Visitor) -> PageResult {
+    let environments = fbksd_exchange::technique::Environment::ALL
+        .iter()
+        .map(|env| EnvironmentView {
+            name: env.as_str(),
+            packages: env
+                .packages()
+                .iter()
+                .map(|p| PackageView {
+                    name: p.name,
+                    version: p.version,
+                    what: p.what,
+                    provides: p.headers.iter().chain(p.modules).copied().collect::<Vec<_>>().join(" "),
+                })
+                .collect(),
+        })
+        .collect();
+    Ok(render(&EnvironmentsPage { nav, environments }))
+}
+
 /// The new-project form.
 #[derive(Deserialize)]
 pub struct ProjectForm {
