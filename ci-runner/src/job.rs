@@ -347,8 +347,8 @@ async fn build(
         .await
         .map_err(|e| Failure::infrastructure(format!("Docker: cannot run the build container: {e}")))?;
     let tail = String::from_utf8_lossy(&tail.lock().unwrap()).trim().to_string();
-    let first_error =
-        first_error_line(&String::from_utf8_lossy(&head.lock().unwrap())).or_else(|| first_error_line(&tail));
+    let head = String::from_utf8_lossy(&head.lock().unwrap()).into_owned();
+    let first_error = first_error_line(&head).or_else(|| first_error_line(&tail));
     match end {
         ContainerEnd { timed_out: true, .. } => {
             return Err(Failure::new(
@@ -365,8 +365,12 @@ async fn build(
         ContainerEnd { exit_code: 0, .. } => {}
         ContainerEnd { exit_code, .. } => {
             let first = first_error.map(|line| format!(" {line}")).unwrap_or_default();
-            let output = format!("{}\n{tail}", String::from_utf8_lossy(&head.lock().unwrap()));
-            let hint = info.environment.explain_missing(&output).map(|h| format!("\n\n{h}")).unwrap_or_default();
+            let hint = info
+                .environment
+                .explain_missing(&head)
+                .or_else(|| info.environment.explain_missing(&tail))
+                .map(|h| format!("\n\n{h}"))
+                .unwrap_or_default();
             return Err(Failure::new(
                 FailureReason::BuildFailed,
                 format!(

@@ -212,10 +212,19 @@ impl Environment {
         }
     }
 
-    /// One line: the base system and the main packages.
+    /// The environment called `name` in `info.json`.
+    pub fn named(name: &str) -> Option<Environment> {
+        Environment::ALL.into_iter().find(|e| e.as_str() == name)
+    }
+
+    /// Its packages with their versions, comma-separated.
+    pub fn contents(self) -> String {
+        self.packages().iter().map(|p| format!("{} {}", p.name, p.version)).collect::<Vec<_>>().join(", ")
+    }
+
+    /// One line: the base system and the packages.
     pub fn summary(self) -> String {
-        let names: Vec<String> = self.packages().iter().map(|p| format!("{} {}", p.name, p.version)).collect();
-        format!("Debian 12; {}", names.join(", "))
+        format!("Debian 12; {}", self.contents())
     }
 
     /// `"cpp" (…), "python" (…)`, for messages that list the choices.
@@ -254,10 +263,7 @@ impl Environment {
         } else if let Some(closest) = self.closest(&missing) {
             hint += &format!(" Did you mean `{closest}`?");
         }
-        hint += &format!(
-            " It has: {} (see /environments on the service).",
-            self.summary().trim_start_matches("Debian 12; ")
-        );
+        hint += &format!(" It has: {} (see /environments on the service).", self.contents());
         Some(hint)
     }
 

@@ -153,15 +153,13 @@ impl TechniqueInfo {
         }
         let has = |path: &str| files.iter().any(|f| f == path);
         let environment = match raw.environment.as_deref() {
-            Some("cpp") => Environment::Cpp,
-            Some("python") => Environment::Python,
-            Some(other) => {
-                return Err(format!(
-                    "{}: \"environment\" {other:?} is unknown: use {} (their contents: /environments)",
+            Some(name) => Environment::named(name).ok_or_else(|| {
+                format!(
+                    "{}: \"environment\" {name:?} is unknown: use {} (their contents: /environments)",
                     at("environment"),
                     Environment::choices()
-                ))
-            }
+                )
+            })?,
             None if has("CMakeLists.txt") => Environment::Cpp,
             None if versions.iter().all(|v| v.executable.ends_with(".py")) => Environment::Python,
             None => {
