@@ -16,6 +16,8 @@
 #   FBKSD_PROFILE    release (default), or debug: the binaries of `cargo build --workspace`, as they are (CI)
 #   FBKSD_SERVER_*   the server's settings, e.g. FBKSD_SERVER_BIND=127.0.0.1:9000
 #   FBKSD_CI_*       the runner's flags, e.g. FBKSD_CI_SCENES=experimental/sphere FBKSD_CI_SPP=1,4
+#   FBKSD_BASELINES  the baselines published on the board's first start (default
+#                    sdk/techniques/baselines.txt; empty for none)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data=${FBKSD_DATA_DIR:-fbksd-data}
@@ -45,12 +47,13 @@ if [ ! -s "$token_file" ]; then
 fi
 token=$(cat "$token_file")
 
-server="" runner=""
+server="" runner="" baselines=""
 # The runner first (it removes its containers), then the server. No `set -e`
 # here: a process that has already ended must not stop the stopping.
 stop() {
     trap - EXIT INT TERM
     set +e
+    if [ -n "$baselines" ]; then kill -TERM "$baselines" 2>/dev/null; wait "$baselines" 2>/dev/null; fi
     if [ -n "$runner" ]; then kill -TERM "$runner" 2>/dev/null; wait "$runner" 2>/dev/null; fi
     if [ -n "$server" ]; then kill -TERM "$server" 2>/dev/null; wait "$server" 2>/dev/null; fi
 }
@@ -83,4 +86,13 @@ export FBKSD_CI_SCENE_ROOT=${FBKSD_CI_SCENE_ROOT:-$(pwd)/scenes}
     --images "$data/images.json" &
 runner=$!
 echo "serve: runner started; it makes the references its scenes lack before it takes jobs (see the home page)" >&2
+
+# The state of the art on the board: each baseline is pushed, benchmarked
+# and published under the `baselines` account, the first time only (those
+# on the current board are skipped). Users' jobs go first.
+baseline_list=${FBKSD_BASELINES-sdk/techniques/baselines.txt}
+if [ -n "$baseline_list" ]; then
+    FBKSD_SERVER_DATA_DIR="$data" "$bin/fbksd-server" baselines "$baseline_list" --url "http://$bind" &
+    baselines=$!
+fi
 wait -n "$server" "$runner"

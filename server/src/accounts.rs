@@ -170,6 +170,40 @@ pub async fn create_user(
     }
 }
 
+/// The service account at `email` (the baselines' publisher), created on
+/// first use: verified without mail, with a password nobody knows, exempt
+/// from quotas and yielding the runners to users (see `is_service`). An
+/// ordinary account at that address is refused, never taken over.
+pub async fn ensure_service_account(pool: &AnyPool, email: &Email) -> Result<User, ServiceError> {
+    if let Some(id) = user_id_by_email(pool, email).await? {
+        let row = sqlx::query("SELECT is_service FROM users WHERE id = $1").bind(&id).fetch_one(pool).await?;
+        if row.try_get::<i64, _>("is_service")? == 0 {
+            return Err(ServiceError::conflict(
+                "email_taken",
+                format!("{} is an ordinary account, not the service account", email.as_str()),
+            ));
+        }
+        return user_by_id(pool, &id).await?.ok_or_else(|| ServiceError::internal("service account vanished"));
+    }
+    let password = Password::parse(&random_token())?;
+    let user = create_user(pool, email, &password, true, false).await?;
+    sqlx::query("UPDATE users SET is_service = 1 WHERE id = $1").bind(&user.id).execute(pool).await?;
+    Ok(user)
+}
+
+/// Whether `user_id` is a service account (no quotas).
+pub async fn is_service(pool: &AnyPool, user_id: &str) -> Result<bool, sqlx::Error> {
+    let row = sqlx::query("SELECT is_service FROM users WHERE id = $1").bind(user_id).fetch_optional(pool).await?;
+    Ok(row.map(|r| r.try_get::<i64, _>("is_service")).transpose()?.unwrap_or(0) != 0)
+}
+
+/// Revokes every access token of `user_id` (a service account's tokens
+/// live as long as the command that made them).
+pub async fn revoke_all_access_tokens(pool: &AnyPool, user_id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("DELETE FROM access_tokens WHERE user_id = $1").bind(user_id).execute(pool).await?;
+    Ok(())
+}
+
 /// Whether any administrator exists.
 pub async fn has_admin(pool: &AnyPool) -> Result<bool, sqlx::Error> {
     let row = sqlx::query("SELECT COUNT(*) AS n FROM users WHERE is_admin = 1").fetch_one(pool).await?;

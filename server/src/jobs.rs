@@ -143,7 +143,8 @@ pub struct Claimed {
     pub token: String,
 }
 
-/// Hands the oldest queued build or benchmark job to `runner_id`, if any.
+/// Hands the oldest queued build or benchmark job to `runner_id`, if any;
+/// a service account's jobs (the baselines) wait while a user's job is queued.
 pub async fn claim(
     pool: &AnyPool,
     postgres: bool,
@@ -152,12 +153,13 @@ pub async fn claim(
 ) -> Result<Option<Claimed>, sqlx::Error> {
     let token = format!("{JOB_TOKEN_PREFIX}{}", crate::accounts::random_token());
     let now = now_ms();
-    let lock = if postgres { " FOR UPDATE SKIP LOCKED" } else { "" };
+    let lock = if postgres { " FOR UPDATE OF j SKIP LOCKED" } else { "" };
     let row = sqlx::query(&format!(
         "UPDATE jobs SET state = 'running', runner_id = $1, token_hash = $2, lease_expires_at = $3, \
          attempts = attempts + 1, started_at = COALESCE(started_at, $4) \
-         WHERE state = 'queued' AND id = (SELECT id FROM jobs WHERE state = 'queued' AND kind <> 'publish' \
-         ORDER BY created_at, id LIMIT 1{lock}) RETURNING id"
+         WHERE state = 'queued' AND id = (SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
+         WHERE j.state = 'queued' AND j.kind <> 'publish' \
+         ORDER BY u.is_service, j.created_at, j.id LIMIT 1{lock}) RETURNING id"
     ))
     .bind(runner_id)
     .bind(crate::accounts::digest(&token))

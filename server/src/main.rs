@@ -1,7 +1,8 @@
 //! `fbksd-server [--config server.toml]`: starts the FBKSD service. With no
 //! configuration it serves http://127.0.0.1:8096 with SQLite and a mail
 //! outbox in ./fbksd-data, and prints the first administrator's one-time
-//! password.
+//! password. `fbksd-server baselines [LIST]` publishes the baseline
+//! techniques through the running service (see `fbksd_server::baselines`).
 
 use clap::Parser;
 use std::path::PathBuf;
@@ -10,8 +11,25 @@ use std::path::PathBuf;
 #[command(version, about = "The FBKSD online service")]
 struct Args {
     /// A TOML configuration file (environment variables FBKSD_SERVER_* override it).
-    #[arg(long)]
+    #[arg(long, global = true)]
     config: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(clap::Subcommand)]
+enum Command {
+    /// Submits, benchmarks and publishes the baseline techniques through the
+    /// running server, under the `baselines` account; skips those already on
+    /// the current board, and waits for the others.
+    Baselines {
+        /// The list of technique folders, one per line, relative to the list.
+        #[arg(default_value = "sdk/techniques/baselines.txt")]
+        list: PathBuf,
+        /// The server's URL (default: http:// and the configured bind address).
+        #[arg(long)]
+        url: Option<String>,
+    },
 }
 
 #[tokio::main]
@@ -21,6 +39,9 @@ async fn main() -> anyhow::Result<()> {
         .init();
     let args = Args::parse();
     let config = fbksd_server::config::Config::load(args.config.as_deref())?;
+    if let Some(Command::Baselines { list, url }) = args.command {
+        return fbksd_server::baselines::submit(&config, &list, url).await;
+    }
     let app = fbksd_server::Application::build(config).await?;
     let config = app.config();
     println!("FBKSD server: {} (data in {})", app.url(), config.data_dir.display());

@@ -310,6 +310,9 @@ pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> Strin
 
 /// Refuses a run over the user's quotas.
 async fn check_quota(state: &AppState, user_id: &str) -> Result<(), ServiceError> {
+    if crate::accounts::is_service(&state.pool, user_id).await? {
+        return Ok(());
+    }
     let queued = crate::jobs::queued_count(&state.pool, user_id).await?;
     if queued >= state.config.max_queued_jobs_per_user as i64 {
         return Err(ServiceError::too_many(

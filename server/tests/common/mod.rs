@@ -94,6 +94,11 @@ impl TestServer {
         }
     }
 
+    /// The configuration the server was started with.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
     /// A client with its own cookie jar (one browser).
     pub fn browser(&self) -> reqwest::Client {
         reqwest::Client::builder().cookie_store(true).build().unwrap()
