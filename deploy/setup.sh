@@ -38,10 +38,12 @@ if ! command -v cargo >/dev/null; then
     echo "setup: cargo (Rust) is required: install it with rustup, then run this again" >&2
     exit 1
 fi
-# Independent implementations the metric tests compare against; numpy for
-# the Python SDK; mypy checks its type stubs.
-PIP_PACKAGES=(numpy scikit-image flip-evaluator mypy)
-if ! python3 -c "import numpy, skimage, flip_evaluator, mypy" >/dev/null 2>&1; then
+# Independent implementations the metric tests compare against; mypy checks
+# the Python SDK's type stubs; and the python environment's own packages,
+# pinned as in its image (numpy, SciPy, OpenEXR, pyoidn), for the baselines'
+# tests.
+PIP_PACKAGES=(scikit-image flip-evaluator mypy -r "$(dirname "$0")/images/python/requirements.txt")
+if ! python3 -c "import numpy, scipy, OpenEXR, pyoidn, skimage, flip_evaluator, mypy" >/dev/null 2>&1; then
     if ! python3 -m pip --version >/dev/null 2>&1; then
         sudo_cmd=""
         [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"

@@ -1,9 +1,11 @@
 //! `deploy/serve.sh`, the script README tells users to run, end to end:
 //! server and runner from the script, its relative data directory, real
 //! Docker and real git. The service answers before the runner is ready;
-//! the C++ box filter goes from push to its private results page. Options
-//! keep it small for CI: the debug build the tests already made, one scene
-//! at 1 and 4 spp, and a port of its own. Prints the times (see README).
+//! the C++ box filter goes from push to its private results page, ahead of
+//! the baselines the first start submits, which are then published and
+//! shown beside it. Options keep it small for CI: the debug build the tests
+//! already made, one scene at 1 and 4 spp, one baseline, and a port of its
+//! own. Prints the times (see README).
 
 mod common;
 
@@ -70,6 +72,9 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
             std::fs::copy(&path, sphere.join(path.file_name().unwrap())).unwrap();
         }
     }
+    // One baseline of the list serve.sh submits by default.
+    let baselines = workspace().join("target/serve-sh-test/baselines.txt");
+    std::fs::write(&baselines, format!("{}\n", workspace().join("sdk/techniques/gaussian-filter").display())).unwrap();
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let url = format!("http://127.0.0.1:{port}");
     let started = Instant::now();
@@ -81,6 +86,7 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
         ("FBKSD_CI_SCENE_ROOT", scene_root.display().to_string()),
         ("FBKSD_CI_SPP", "1,4".into()),
         ("FBKSD_CI_RUN_TIMEOUT", "60s".into()),
+        ("FBKSD_BASELINES", baselines.display().to_string()),
         ("RUST_LOG", "info".into()),
     ]);
     serve.0.line_with(&format!("FBKSD server: {url}"), Duration::from_secs(300));
@@ -132,6 +138,23 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
         assert_eq!(fetched.status(), 200, "{file}");
         assert!(fetched.bytes().await.unwrap().len() > 20, "{file} is empty");
     }
+    // The baselines waited for Ada's job, then went on the board, and her
+    // page now shows them beside her technique.
+    let deadline = Instant::now() + Duration::from_secs(600);
+    let board = loop {
+        let board = reqwest::get(format!("{url}/api/v1/leaderboard")).await.unwrap().text().await.unwrap();
+        if board.contains("gaussian-filter") || Instant::now() > deadline {
+            break board;
+        }
+        tokio::time::sleep(Duration::from_secs(2)).await;
+    };
+    assert!(board.contains("gaussian-filter"), "no baseline on the board:\n{board}\n{}", serve.output());
+    assert!(serve.output().contains("baselines: gaussian-filter published"), "{}", serve.output());
+    let viewer: serde_json::Value =
+        ada.browser.get(format!("{url}{document}")).send().await.unwrap().json().await.unwrap();
+    let names: Vec<&str> = viewer["techniques"].as_array().unwrap().iter().filter_map(|t| t["name"].as_str()).collect();
+    assert!(names.contains(&"gaussian-filter"), "the private page's viewer lacks the baseline: {names:?}");
+
     eprintln!(
         "FIGURE serve.sh: answered {:.1} s after start; push (FBKSD_RUN) to private results {:.1} s",
         answered.as_secs_f64(),

@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# Every baseline of sdk/techniques/baselines.txt on the service's default
+# scene pool (the seven experimental scenes and the small Cornell box) at
+# 4, 16 and 64 spp, through `fbksd run` with release binaries, as the
+# service would benchmark them; then the metrics, and a table in the form
+# of the thesis's figure 6.6: rMSE, PSNR, SSIM, FLIP, technique time and
+# render time per technique, scene and budget (markdown, on stdout).
+# References are made once and cached beside the scenes.
+#
+#   bash deploy/bench-baselines.sh [SPP] [SCENE...]   # default 4,16,64 and the pool
+set -euo pipefail
+cd "$(dirname "$0")/.."
+spp=${1:-4,16,64}
+shift || true
+scenes=("$@")
+if [ ${#scenes[@]} -eq 0 ]; then
+    scenes=(scenes/experimental/* scenes/production-small/cornell-box)
+fi
+root=$PWD
+work=$root/target/bench-baselines
+rm -rf "$work/results" && mkdir -p "$work/python/fbksd"
+
+cargo build --release --locked --workspace --bins --lib >&2
+bash deploy/install-sdk.sh "$work/sdk" target/release >&2
+# The Python package as pip would install it: sources and the release native module.
+cp sdk/python/python/fbksd/*.py "$work/python/fbksd/"
+cp target/release/lib_native.so "$work/python/fbksd/_native.so"
+export PYTHONPATH=$work/python
+
+for scene in "${scenes[@]}"; do
+    case "$scene" in
+        *experimental*) target/release/fbksd-procedural reference "$scene" >&2 ;;
+        *) target/release/fbksd-embree reference "$scene" >&2 ;;
+    esac
+done
+
+# Each baseline built as the service builds it (CMake, Release) or run as it is.
+techniques=()
+while read -r name; do
+    repo=sdk/techniques/$name
+    if [ -f "$repo/CMakeLists.txt" ]; then
+        cmake -S "$repo" -B "$work/build/$name" -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$work/sdk" >&2
+        cmake --build "$work/build/$name" -j2 >&2
+        dir=$work/build/$name
+    else
+        dir=$repo
+    fi
+    while IFS=$'\t' read -r version executable; do
+        techniques+=(-t "$version=$dir/$executable")
+    done < <(python3 -c '
+import json, sys
+info = json.load(open(sys.argv[1]))
+for v in info["versions"]:
+    name = sys.argv[2] if len(info["versions"]) == 1 else sys.argv[2] + "-" + v["name"]
+    print(name + "\t" + v["executable"])' "$repo/info.json" "$name")
+done < <(sed -e 's/#.*//' -e '/^[[:space:]]*$/d' sdk/techniques/baselines.txt)
+
+scene_args=()
+for scene in "${scenes[@]}"; do scene_args+=(-s "$scene"); done
+target/release/fbksd run "${techniques[@]}" "${scene_args[@]}" --spp "$spp" --results "$work/results" \
+    --time-limit 20m >&2 || echo "bench-baselines: some runs failed (see the table's status)" >&2
+target/release/fbksd results compute --results "$work/results" --scenes scenes >&2
+
+python3 - "$work/results/index.json" <<'PY'
+import json, sys
+runs = json.load(open(sys.argv[1]))["runs"]
+print("| scene | spp | technique | rMSE | PSNR | SSIM | FLIP | technique s | render s | status |")
+print("|---|---|---|---|---|---|---|---|---|---|")
+for r in sorted(runs, key=lambda r: (r["scene"], r["spp"], r["technique"])):
+    m = r.get("metrics", {})
+    def value(key, digits):
+        return f"{m[key]:.{digits}f}" if key in m else "—"
+    print(f"| {r['scene']} | {r['spp']} | {r['technique']} | {value('rMSE', 4)} | {value('PSNR', 2)} | "
+          f"{value('SSIM', 4)} | {value('FLIP', 4)} | {r['technique_ms'] / 1000:.2f} | "
+          f"{r['render_ms'] / 1000:.2f} | {r['status']} |")
+PY
+echo "bench-baselines: results in $work/results (\`target/release/fbksd results page --results $work/results --scenes scenes\` for the viewer)" >&2

@@ -1,0 +1,1 @@
+../nlm/nl_means.py

@@ -1,0 +1,1 @@
+../gaussian-filter/splat.py
