@@ -61,13 +61,20 @@ trap 'stop; exit 130' INT
 trap 'stop; exit 143' TERM
 trap stop EXIT
 
+bind=${FBKSD_SERVER_BIND:-127.0.0.1:8096}
+answers() { python3 -c 'import socket,sys; h,p=sys.argv[1].rsplit(":",1); socket.create_connection((h.strip("[]"),int(p)),1)' "$bind" 2>/dev/null; }
+# Another service on the address would answer for ours, which cannot bind.
+if answers; then
+    echo "serve: something already answers at $bind (another serve.sh?): stop it, or set FBKSD_SERVER_BIND" >&2
+    exit 1
+fi
+
 echo "serve: building the server" >&2
 build -p fbksd-server
 FBKSD_SERVER_DATA_DIR="$data" FBKSD_SERVER_RUNNER_REGISTRATION_TOKEN="$token" "$bin/fbksd-server" &
 server=$!
-bind=${FBKSD_SERVER_BIND:-127.0.0.1:8096}
 for attempt in $(seq 150); do
-    python3 -c 'import socket,sys; h,p=sys.argv[1].rsplit(":",1); socket.create_connection((h.strip("[]"),int(p)),1)' "$bind" 2>/dev/null && break
+    answers && break
     kill -0 "$server" 2>/dev/null || { echo "serve: the server stopped" >&2; exit 1; }
     [ "$attempt" -lt 150 ] || { echo "serve: the server does not answer at $bind after 30 s" >&2; exit 1; }
     sleep 0.2
