@@ -176,8 +176,7 @@ pub async fn create_user(
 /// ordinary account at that address is refused, never taken over.
 pub async fn ensure_service_account(pool: &AnyPool, email: &Email) -> Result<User, ServiceError> {
     if let Some(id) = user_id_by_email(pool, email).await? {
-        let row = sqlx::query("SELECT is_service FROM users WHERE id = $1").bind(&id).fetch_one(pool).await?;
-        if row.try_get::<i64, _>("is_service")? == 0 {
+        if !is_service(pool, &id).await? {
             return Err(ServiceError::conflict(
                 "email_taken",
                 format!("{} is an ordinary account, not the service account", email.as_str()),

@@ -74,7 +74,6 @@ pub async fn submit(config: &Config, list: &Path, url: Option<String>) -> anyhow
         .await
         .map_err(|e| anyhow!("{}", e.message))?;
     let season = crate::results::current_season(&pool).await?;
-    pool.close().await;
     let api = Api { http: reqwest::Client::new(), url, token, season };
 
     let mut waiting = Vec::new();
@@ -92,7 +91,9 @@ pub async fn submit(config: &Config, list: &Path, url: Option<String>) -> anyhow
             Err(e) => failed.push(format!("{}: {e:#}", baseline.name)),
         }
     }
-    api.revoke().await;
+    // The token is this command's alone: it ends with it.
+    crate::accounts::revoke_all_access_tokens(&pool, &account.id).await?;
+    pool.close().await;
     if !failed.is_empty() {
         bail!("{} of {} baselines are not on the board:\n{}", failed.len(), baselines.len(), failed.join("\n"));
     }
@@ -196,16 +197,6 @@ impl Api {
         let pipelines = format!("{}/api/v1/projects/{}/pipelines", self.url, baseline.name);
         self.call(self.http.post(pipelines).json(&variables)).await?;
         Ok(format!("{}/results/{result}", self.url))
-    }
-
-    /// The token is the command's alone: revoked when it ends.
-    async fn revoke(&self) {
-        let tokens = self.call(self.http.get(format!("{}/api/v1/tokens", self.url))).await;
-        for token in tokens.ok().and_then(|t| t.as_array().cloned()).unwrap_or_default() {
-            if let Some(id) = token["id"].as_str() {
-                let _ = self.call(self.http.delete(format!("{}/api/v1/tokens/{id}", self.url))).await;
-            }
-        }
     }
 }
 
