@@ -42,6 +42,13 @@ pub struct RunnerConfig {
     #[arg(long, env = "FBKSD_CI_SPP", value_delimiter = ',')]
     pub spp: Vec<u64>,
 
+    /// How many times each run is made, with sample seeds 0, 1, …: metric
+    /// values carry confidence intervals and the ranking ties what the
+    /// noise cannot separate. 3 keeps a job on the default pool within a
+    /// few minutes on two cores.
+    #[arg(long, env = "FBKSD_CI_REPEATS", default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub repeats: u32,
+
     /// Cores every container is pinned to, e.g. "0-1" (default: all of this machine's).
     #[arg(long, env = "FBKSD_CI_CPUS")]
     pub cpus: Option<String>,

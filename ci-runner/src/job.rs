@@ -300,6 +300,7 @@ async fn build(
                 working_dir: Some("/build".into()),
                 memory_mib: ctx.config.memory_mib,
                 job_id: claim.job.id.clone(),
+                cpuset: None,
             };
             (spec, Install { host: build })
         }
@@ -314,6 +315,7 @@ async fn build(
                 working_dir: Some(TECHNIQUE_MOUNT.into()),
                 memory_mib: ctx.config.memory_mib,
                 job_id: claim.job.id.clone(),
+                cpuset: None,
             };
             (spec, Install { host: src.to_path_buf() })
         }
@@ -427,6 +429,12 @@ async fn benchmark(
             spps: if ctx.config.spp.is_empty() { s.meta.spp.clone() } else { ctx.config.spp.clone() },
         })
         .collect();
+    // With four cores or more, the renderer and the technique get disjoint
+    // halves: neither's clock then pays for the other's threads.
+    let cores = crate::machine::split_cpus(&ctx.machine.cpuset);
+    if let Some(c) = &cores {
+        log.line(format!("[fbksd-ci] renderer on cores {}, technique on cores {}", c.renderer, c.technique));
+    }
     let launcher = DockerLauncher {
         sandbox: ctx.sandbox.clone(),
         handle: tokio::runtime::Handle::current(),
@@ -436,12 +444,14 @@ async fn benchmark(
             mounts: vec![Mount { host: install.host.clone(), container: TECHNIQUE_MOUNT.into(), writable: false }],
             working_dir: Some(TECHNIQUE_MOUNT.into()),
             memory_mib: ctx.config.memory_mib,
+            cpuset: cores.as_ref().map(|c| c.technique.clone()),
         },
         renderer: RoleContainer {
             image: ctx.images.renderer.tag.clone(),
             mounts: Vec::new(),
             working_dir: None,
             memory_mib: ctx.config.renderer_memory_mib,
+            cpuset: cores.as_ref().map(|c| c.renderer.clone()),
         },
         cancelled: cancelled.clone(),
     };
@@ -455,6 +465,7 @@ async fn benchmark(
             ..Limits::default()
         },
         launcher: Arc::new(launcher),
+        repeats: ctx.config.repeats,
     };
     let log = log.clone();
     let records = tokio::task::spawn_blocking(move || {
@@ -465,7 +476,8 @@ async fn benchmark(
                 } else {
                     format!("{}: {}", r.status, r.message)
                 };
-                log.line(format!("[fbksd-ci] {} at {} spp: {}", r.scene, r.spp_budget, how));
+                let seed = if r.repeat > 0 { format!(" (seed {})", r.seed) } else { String::new() };
+                log.line(format!("[fbksd-ci] {} at {} spp{seed}: {}", r.scene, r.spp_budget, how));
             }
         })
     })
@@ -513,6 +525,16 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
         .map_err(|e| Failure::infrastructure(format!("the metrics panicked: {e}")))?
         .map_err(|e| Failure::infrastructure(format!("the metrics: {e}")))?
     };
+    // Repeats beyond the first are scored here and their images dropped:
+    // the viewer shows a run's first repeat, the values carry all of them.
+    let mut index = index;
+    for run in &mut index.runs {
+        for repeat in run.repeats.iter_mut().skip(1) {
+            if let Some(image) = repeat.image.take() {
+                let _ = std::fs::remove_file(results.join(image));
+            }
+        }
+    }
     let mut files = Vec::new();
     files_under(results, &results.join(path_safe_name(&info.short_name)), &mut files);
     files_under(results, &results.join("renderer-logs"), &mut files);

@@ -12,7 +12,7 @@
 
 use crate::sandbox::{ContainerSpec, Mount, Sandbox, Usage};
 use fbksd_core::rendezvous;
-use fbksd_manager::process::ExitInfo;
+use fbksd_manager::process::{CpuClock, ExitInfo};
 use fbksd_manager::{LaunchSpec, Launcher, ProcessRole, Running};
 use std::io::{self, Write};
 use std::os::unix::process::ExitStatusExt;
@@ -36,6 +36,8 @@ pub struct RoleContainer {
     pub working_dir: Option<String>,
     /// Memory limit in MiB.
     pub memory_mib: u64,
+    /// Cores, when not all of the sandbox's.
+    pub cpuset: Option<String>,
 }
 
 /// Starts renderers and techniques in sandboxed containers.
@@ -82,6 +84,7 @@ impl Launcher for DockerLauncher {
             working_dir: role.working_dir.clone(),
             memory_mib: role.memory_mib,
             job_id: self.job_id.clone(),
+            cpuset: role.cpuset.clone(),
         };
         let sandbox = self.sandbox.clone();
         let id = self
@@ -173,6 +176,12 @@ impl Running for RunningContainer {
 
     fn started_at(&self) -> Instant {
         self.started
+    }
+
+    fn cpu_clock(&self) -> Option<CpuClock> {
+        let id = self.id.clone();
+        Usage::read(&id)?;
+        Some(Box::new(move || Usage::read(&id).map(|u| u.cpu)))
     }
 }
 

@@ -38,6 +38,33 @@ impl Machine {
     }
 }
 
+/// Disjoint cores for the renderer and the technique of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoleCores {
+    /// The renderer's cpuset (the first half).
+    pub renderer: String,
+    /// The technique's cpuset (the second half).
+    pub technique: String,
+}
+
+/// Splits a cpuset of four cores or more into two disjoint halves; `None`
+/// for fewer cores (both then share them) or a malformed list.
+pub fn split_cpus(cpuset: &str) -> Option<RoleCores> {
+    let mut cpus = Vec::new();
+    for part in cpuset.split(',') {
+        match part.split_once('-') {
+            Some((a, b)) => cpus.extend(a.trim().parse::<usize>().ok()?..=b.trim().parse::<usize>().ok()?),
+            None => cpus.push(part.trim().parse::<usize>().ok()?),
+        }
+    }
+    if cpus.len() < 4 {
+        return None;
+    }
+    let join = |c: &[usize]| c.iter().map(usize::to_string).collect::<Vec<_>>().join(",");
+    let (renderer, technique) = cpus.split_at(cpus.len() / 2);
+    Some(RoleCores { renderer: join(renderer), technique: join(technique) })
+}
+
 /// The number of cores a cpuset list names (`0-3,6` → 5); `None` when malformed.
 pub fn count_cpus(cpuset: &str) -> Option<usize> {
     let mut n = 0;
@@ -61,5 +88,15 @@ mod tests {
         assert_eq!(super::count_cpus("1"), Some(1));
         assert_eq!(super::count_cpus("3-1"), None);
         assert_eq!(super::count_cpus("a"), None);
+    }
+
+    #[test]
+    fn four_cores_or_more_are_split_between_the_roles() {
+        assert_eq!(super::split_cpus("0-1"), None);
+        assert_eq!(super::split_cpus("0-2"), None);
+        let split = super::split_cpus("0-3").unwrap();
+        assert_eq!((split.renderer.as_str(), split.technique.as_str()), ("0,1", "2,3"));
+        let split = super::split_cpus("2,4-8").unwrap();
+        assert_eq!((split.renderer.as_str(), split.technique.as_str()), ("2,4,5", "6,7,8"));
     }
 }

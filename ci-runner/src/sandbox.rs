@@ -61,6 +61,8 @@ pub struct ContainerSpec {
     pub memory_mib: u64,
     /// The job it belongs to.
     pub job_id: String,
+    /// Cores it is pinned to, when not all of the sandbox's.
+    pub cpuset: Option<String>,
 }
 
 /// How a container ended.
@@ -120,7 +122,7 @@ impl Sandbox {
             memory: Some(memory),
             memory_swap: Some(memory),
             pids_limit: Some(self.pids),
-            cpuset_cpus: Some(self.cpuset.clone()),
+            cpuset_cpus: Some(spec.cpuset.clone().unwrap_or_else(|| self.cpuset.clone())),
             ulimits: Some(vec![ulimit("fsize", MAX_FILE_BYTES), ulimit("core", 0), ulimit("nofile", 4096)]),
             ipc_mode: Some("private".into()),
             binds: Some(

@@ -132,6 +132,12 @@ async fn serve_sh_takes_a_push_to_its_private_results_page() {
         .and_then(|runs| runs.iter().find(|run| run["spp"] == 4))
         .unwrap_or_else(|| panic!("no run at 4 spp: {viewer}"));
     assert_eq!(run["status"], "ok", "{viewer}");
+    // The service's default: each run made with three sample seeds, so its
+    // values carry intervals and the ranking its ties.
+    assert_eq!(run["seeds"], 3, "{run}");
+    assert!(run["intervals"]["MSE"]["low"].as_f64() < run["intervals"]["MSE"]["high"].as_f64(), "{run}");
+    assert!(log.contains("sphere at 4 spp (seed 2)"), "{log}");
+    assert!(!viewer["rankings"]["equal_time"].as_array().unwrap().is_empty(), "{viewer}");
     for file in [&run["pixels"], &scene["reference"]] {
         let file = file.as_str().unwrap_or_else(|| panic!("a pixel file is missing: {viewer}"));
         let fetched = ada.browser.get(format!("{url}{file}")).send().await.unwrap();

@@ -8,11 +8,18 @@
 //! costs one small query however many techniques are published, and every
 //! server instance sees every change.
 //!
-//! Ranking fixes the original's bias: a technique with no value in a group
-//! (its run failed) ranks last there instead of being skipped.
+//! Ranking is [`fbksd_exchange::ranking`]'s, twice: at equal samples per
+//! (scene, spp) group and at equal time (each technique's error read off
+//! its error-against-time curve at the fastest technique's time at each
+//! budget). Differences within the noise of the repeats tie, and a
+//! technique with no value in a group (its run failed, or it cannot give a
+//! result in that time) ranks last there instead of being skipped, which
+//! fixes the original's bias.
 
 use crate::results::{ResultSet, StoredRun};
+use fbksd_exchange::ranking::{equal_spp, equal_time, At};
 use fbksd_exchange::results::IndexEntry;
+use fbksd_exchange::stats::Interval;
 use fbksd_exchange::MetricInfo;
 use serde::Serialize;
 use sqlx::AnyPool;
@@ -34,10 +41,21 @@ pub struct Entry {
     pub status: String,
     /// Why, if not ok.
     pub message: String,
-    /// Value of each board metric, in `Board::metrics` order.
+    /// Value of each board metric, in `Board::metrics` order (the mean over
+    /// the repeats).
     pub values: Vec<Option<f64>>,
-    /// Technique time.
+    /// Each value's 95 % confidence interval, when the run was repeated.
+    pub intervals: Vec<Option<Interval>>,
+    /// Place in the group by the sort metric (ties share).
+    pub place: Option<f64>,
+    /// The techniques it ties with by the sort metric.
+    pub tied_with: Vec<String>,
+    /// Technique time (median over the repeats).
     pub technique_ms: f64,
+    /// Time to the result: technique time + waiting for the renderer (median).
+    pub time_ms: f64,
+    /// Coefficient of variation of the technique time over the repeats.
+    pub time_cv: Option<f64>,
     /// The result image, if uploaded.
     pub image: Option<String>,
 }
@@ -72,6 +90,10 @@ pub struct Standing {
     pub mean_rank: f64,
     /// Groups with no value (ranked last).
     pub missing: usize,
+    /// Groups in which it ties with another technique.
+    pub tied: usize,
+    /// Mean rank at equal time (NaN when no time point was ranked).
+    pub mean_rank_time: f64,
 }
 
 /// A whole board.
@@ -224,18 +246,57 @@ fn assemble(
         None => true,
     };
 
+    // Every shown run as an index entry of its result set (techniques are
+    // told apart by set id), its repeats summed up.
+    let index: Vec<IndexEntry> = runs
+        .iter()
+        .filter(|r| shown(&r.scene) && technique_of.contains_key(r.result_id.as_str()))
+        .map(|r| r.index_entry(&r.result_id))
+        .collect();
+    // Rank by the sort metric only.
+    let by_sort: Vec<IndexEntry> = index
+        .iter()
+        .cloned()
+        .map(|mut e| {
+            e.metrics.retain(|m, _| *m == sort);
+            e.repeats.iter_mut().for_each(|r| r.metrics.retain(|m, _| *m == sort));
+            e
+        })
+        .collect();
+    let at_spp = equal_spp(&by_sort, lower_is_better);
+    let at_time = equal_time(&by_sort, lower_is_better);
+    let places: BTreeMap<(&str, u64, &str), &fbksd_exchange::ranking::Place> = at_spp
+        .cells
+        .iter()
+        .filter_map(|c| match c.at {
+            At::Spp { spp } => Some(c.places.iter().map(move |p| ((c.scene.as_str(), spp, p.technique.as_str()), p))),
+            At::Time { .. } => None,
+        })
+        .flatten()
+        .collect();
+
     let mut by_group: BTreeMap<(String, i64), Vec<Entry>> = BTreeMap::new();
-    for run in runs.iter().filter(|r| shown(&r.scene)) {
-        let Some(set) = technique_of.get(run.result_id.as_str()) else { continue };
-        by_group.entry((run.scene.clone(), run.spp)).or_default().push(Entry {
+    for run in &index {
+        let set = technique_of[run.technique.as_str()];
+        let place = places.get(&(run.scene.as_str(), run.spp, run.technique.as_str()));
+        by_group.entry((run.scene.clone(), run.spp as i64)).or_default().push(Entry {
             technique: set.technique.clone(),
             full_name: set.full_name().to_string(),
             result_id: set.id.clone(),
             highlighted: highlighted == Some(set.id.as_str()),
-            status: run.status.clone(),
+            status: run.status.as_str().to_string(),
             message: run.message.clone(),
             values: metrics.iter().map(|m| run.metrics.get(&m.acronym).copied()).collect(),
+            intervals: metrics.iter().map(|m| run.intervals.get(&m.acronym).copied()).collect(),
+            place: place.map(|p| p.place),
+            tied_with: place
+                .map(|p| p.tied_with.iter().filter_map(|id| technique_of.get(id.as_str())).map(|s| s.technique.clone()))
+                .into_iter()
+                .flatten()
+                .collect(),
             technique_ms: run.technique_ms,
+            time_ms: run.time(),
+            time_cv: run.timing.filter(|_| run.repeats.len() > 1).map(|t| t.technique.cv),
             image: run.image.clone(),
         });
     }
@@ -258,33 +319,11 @@ fn assemble(
         })
         .collect();
 
-    // Mean rank by the sort metric over the shown groups; a set missing from
-    // a group (or without a value there) counts as last.
-    let index: Vec<IndexEntry> = runs
+    let time_rank: BTreeMap<&str, f64> =
+        at_time.standings.iter().map(|s| (s.technique.as_str(), s.mean_rank)).collect();
+    let standings = at_spp
+        .standings
         .iter()
-        .filter(|r| shown(&r.scene))
-        .filter_map(|r| {
-            let set = technique_of.get(r.result_id.as_str())?;
-            Some(IndexEntry {
-                technique: set.id.clone(),
-                scene: r.scene.clone(),
-                spp: r.spp as u64,
-                status: fbksd_exchange::RunStatus::Ok,
-                message: String::new(),
-                log: String::new(),
-                image: None,
-                technique_ms: r.technique_ms,
-                render_ms: r.render_ms,
-                wall_ms: r.wall_ms,
-                cpu_ms: r.cpu_ms,
-                peak_memory_bytes: r.peak_memory_bytes as u64,
-                used_samples: r.used_samples as u64,
-                metrics: r.metrics.get(&sort).map(|v| (sort.clone(), *v)).into_iter().collect(),
-            })
-        })
-        .collect();
-    let standings = fbksd_exchange::ranking::rank(&index, lower_is_better)
-        .into_iter()
         .filter_map(|s| {
             let set = technique_of.get(s.technique.as_str())?;
             Some(Standing {
@@ -295,6 +334,8 @@ fn assemble(
                 highlighted: highlighted == Some(set.id.as_str()),
                 mean_rank: s.mean_rank,
                 missing: s.missing,
+                tied: s.tied,
+                mean_rank_time: time_rank.get(s.technique.as_str()).copied().unwrap_or(f64::NAN),
             })
         })
         .filter(|s| s.mean_rank.is_finite())
@@ -359,7 +400,62 @@ mod tests {
             metrics,
             image: None,
             log: None,
+            repeats: Vec::new(),
         }
+    }
+
+    /// A run repeated with seeds 0, 1, 2: MSE per seed, time to result per seed.
+    fn repeated(id: &str, scene: &str, spp: i64, mse: [f64; 3], time_ms: f64) -> StoredRun {
+        let mut r = run(id, scene, Some(mse[0]), 0.5);
+        r.spp = spp;
+        r.repeats = mse
+            .iter()
+            .enumerate()
+            .map(|(seed, v)| fbksd_exchange::results::Repeat {
+                seed: seed as u64,
+                status: fbksd_exchange::RunStatus::Ok,
+                message: String::new(),
+                log: String::new(),
+                image: None,
+                technique_ms: time_ms * (1.0 + seed as f64 / 100.0),
+                render_ms: 0.0,
+                wall_ms: time_ms,
+                cpu_ms: time_ms,
+                waiting_ms: 0.0,
+                peak_memory_bytes: 0,
+                used_samples: 0,
+                metrics: [("MSE".to_string(), *v)].into(),
+            })
+            .collect();
+        r
+    }
+
+    #[test]
+    fn noise_ties_and_the_equal_time_rank_reach_the_board() {
+        let sets = [set("a", "alpha"), set("b", "beta"), set("c", "gamma")];
+        // alpha and beta differ by float rounding; gamma is 10x better but 4x slower.
+        let mut runs = Vec::new();
+        for (spp, t) in [(4, 10.0), (16, 40.0)] {
+            let e = 1.0 / spp as f64;
+            runs.push(repeated("a", "s", spp, [e, 1.1 * e, 0.9 * e], t));
+            runs.push(repeated("b", "s", spp, [e * (1.0 + 1e-9), 1.1 * e, 0.9 * e], t));
+            runs.push(repeated("c", "s", spp, [0.1 * e, 0.11 * e, 0.09 * e], 4.0 * t));
+        }
+        let board = assemble(1, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
+        let group = &board.groups[0];
+        let entry = |t: &str| group.entries.iter().find(|e| e.technique == t).unwrap();
+        assert_eq!(entry("alpha").tied_with, ["beta"]);
+        assert_eq!((entry("alpha").place, entry("gamma").place), (Some(2.5), Some(1.0)));
+        let interval = entry("gamma").intervals[0].expect("repeated runs carry an interval");
+        assert!(interval.low < interval.mean && interval.mean < interval.high);
+        assert!(entry("alpha").time_cv.unwrap() > 0.0);
+        let standing = |t: &str| board.standings.iter().find(|s| s.technique == t).unwrap();
+        assert_eq!(standing("gamma").mean_rank, 1.0);
+        assert_eq!((standing("alpha").mean_rank, standing("alpha").tied), (2.5, 2));
+        // At equal time gamma has no result at alpha's 10 ms (its 4 spp takes 40 ms): last there;
+        // at 40 ms its 4 spp (0.025) beats alpha's 16 spp (0.0625).
+        assert_eq!(standing("gamma").mean_rank_time, (3.0 + 1.0) / 2.0);
+        assert_eq!(standing("alpha").mean_rank_time, (1.5 + 2.5) / 2.0);
     }
 
     #[test]
@@ -386,8 +482,10 @@ mod tests {
 
         let by_ssim =
             assemble(1, &sets, &runs, &tags, &BoardQuery { sort: Some("SSIM".into()), ..Default::default() }, None);
-        assert_eq!(by_ssim.groups[1].entries[0].technique, "beta", "higher SSIM is better");
-        assert_eq!(by_ssim.standings[0].technique, "beta");
+        assert_eq!(by_ssim.groups[0].entries[0].technique, "beta", "higher SSIM is better");
+        // A failed run has no value by any metric, whatever it recorded.
+        assert_eq!(by_ssim.groups[1].entries[0].technique, "alpha");
+        assert_eq!(by_ssim.groups[1].entries[1].values, [None, None]);
 
         let dof = assemble(1, &sets, &runs, &tags, &BoardQuery { tag: Some("dof".into()), ..Default::default() }, None);
         assert_eq!(dof.groups.len(), 1);

@@ -9,6 +9,7 @@
 
 use crate::error::ServiceError;
 use crate::now_ms;
+use fbksd_exchange::results::{IndexEntry, Repeat};
 use fbksd_exchange::MetricInfo;
 use serde::Serialize;
 use sqlx::{AnyPool, Row};
@@ -123,6 +124,8 @@ pub struct StoredRun {
     pub image: Option<String>,
     /// The run's record among the set's files (not stored before the viewer).
     pub log: Option<String>,
+    /// Its repeats, one per sample seed (empty for runs stored before repeats).
+    pub repeats: Vec<Repeat>,
 }
 
 const SET_COLUMNS: &str = "r.id, r.technique, p.name AS project_name, r.user_id, r.info, r.commit_sha, r.season, \
@@ -223,7 +226,7 @@ impl Selection<'_> {
 pub async fn runs(pool: &AnyPool, which: Selection<'_>) -> Result<Vec<StoredRun>, sqlx::Error> {
     let sql = format!(
         "SELECT result_id, scene, spp, status, message, technique_ms, render_ms, wall_ms, cpu_ms, peak_memory_bytes, \
-         used_samples, metric_values, image, log FROM result_runs WHERE {} ORDER BY result_id, scene, spp",
+         used_samples, metric_values, image, log, repeats FROM result_runs WHERE {} ORDER BY result_id, scene, spp",
         which.condition()
     );
     let rows = which.bind(sqlx::query(&sql)).fetch_all(pool).await?;
@@ -245,9 +248,42 @@ pub async fn runs(pool: &AnyPool, which: Selection<'_>) -> Result<Vec<StoredRun>
                 metrics: serde_json::from_str(&values).unwrap_or_default(),
                 image: r.try_get("image")?,
                 log: r.try_get("log")?,
+                repeats: r
+                    .try_get::<Option<String>, _>("repeats")?
+                    .and_then(|json| serde_json::from_str(&json).ok())
+                    .unwrap_or_default(),
             })
         })
         .collect()
+}
+
+impl StoredRun {
+    /// The run as a results-index entry of `technique`, with its repeats
+    /// summed up (intervals, spreads, time to the result), for ranking.
+    pub fn index_entry(&self, technique: &str) -> IndexEntry {
+        let mut entry = IndexEntry {
+            status: serde_json::from_value(serde_json::Value::String(self.status.clone()))
+                .unwrap_or(fbksd_exchange::RunStatus::InvalidOutput),
+            message: self.message.clone(),
+            log: self.log.clone().unwrap_or_default(),
+            image: self.image.clone(),
+            technique_ms: self.technique_ms,
+            render_ms: self.render_ms,
+            wall_ms: self.wall_ms,
+            cpu_ms: self.cpu_ms,
+            peak_memory_bytes: self.peak_memory_bytes as u64,
+            used_samples: self.used_samples as u64,
+            metrics: self.metrics.clone(),
+            repeats: self.repeats.clone(),
+            ..IndexEntry::new(technique, &self.scene, self.spp as u64)
+        };
+        if entry.repeats.is_empty() {
+            entry.upgrade();
+        } else {
+            entry.summarize();
+        }
+        entry
+    }
 }
 
 /// Scenes of the selected result sets: name → tags (the union over the sets).
@@ -316,8 +352,8 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
     for run in &new.upload.runs {
         sqlx::query(
             "INSERT INTO result_runs (result_id, scene, spp, status, message, technique_ms, render_ms, wall_ms, cpu_ms, \
-             peak_memory_bytes, used_samples, metric_values, image, log) \
-             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14)",
+             peak_memory_bytes, used_samples, metric_values, image, log, repeats) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
         )
         .bind(&id)
         .bind(&run.scene)
@@ -333,6 +369,7 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
         .bind(serde_json::to_string(&run.metrics).unwrap_or_default())
         .bind(run.image.as_deref())
         .bind(Some(run.log.as_str()).filter(|l| !l.is_empty()))
+        .bind((!run.repeats.is_empty()).then(|| serde_json::to_string(&run.repeats).unwrap_or_default()))
         .execute(&mut **tx)
         .await?;
     }

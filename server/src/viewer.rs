@@ -10,8 +10,7 @@
 use crate::error::ServiceError;
 use crate::results::{self, ResultSet, Selection, StoredRun};
 use fbksd_exchange::results::RunFiles;
-use fbksd_exchange::viewer::{Delivery, ViewerData, ViewerRun, ViewerScene, ViewerTechnique};
-use fbksd_exchange::RunStatus;
+use fbksd_exchange::viewer::{Delivery, Rankings, ViewerData, ViewerRun, ViewerScene, ViewerTechnique};
 use sqlx::AnyPool;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -43,6 +42,14 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
         set.metrics.iter().filter(|m| m.has_error_map).map(|m| m.acronym.clone()).collect();
     let data_dir = data_dir.to_path_buf();
     let scenes: BTreeSet<String> = tags.into_keys().collect();
+    let entries: Vec<_> = runs
+        .iter()
+        .filter(|r| scenes.contains(&r.scene) && sets.iter().any(|s| s.id == r.result_id))
+        .map(|r| r.index_entry(&r.result_id))
+        .collect();
+    let lower_is_better =
+        |acronym: &str| doc.metrics.iter().find(|m| m.acronym == acronym).is_none_or(|m| m.lower_is_better);
+    doc.rankings = Rankings::of(&entries, lower_is_better);
     // Existence checks touch the disk once per file: off the async threads.
     let techniques = tokio::task::spawn_blocking(move || {
         sets.iter()
@@ -67,7 +74,7 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
 
 fn viewer_run(data_dir: &Path, run: &StoredRun, metrics_with_maps: &[String]) -> ViewerRun {
     let files = results::files_dir(data_dir, &run.result_id);
-    let files_of_run = RunFiles { spp: run.spp as u64 };
+    let files_of_run = RunFiles::first(run.spp as u64);
     // The run's directory among the set's files: beside its record or image.
     let dir = run.log.as_deref().or(run.image.as_deref()).and_then(|f| Path::new(f).parent()).map(Path::to_path_buf);
     let existing = |name: String| -> Option<String> {
@@ -75,22 +82,12 @@ fn viewer_run(data_dir: &Path, run: &StoredRun, metrics_with_maps: &[String]) ->
         files.join(&rel).is_file().then(|| format!("/results/{}/files/{}", run.result_id, rel.to_string_lossy()))
     };
     ViewerRun {
-        scene: run.scene.clone(),
-        spp: run.spp as u64,
-        status: serde_json::from_value(serde_json::Value::String(run.status.clone())).unwrap_or(RunStatus::Crashed),
-        message: run.message.clone(),
-        technique_ms: run.technique_ms,
-        render_ms: run.render_ms,
-        wall_ms: run.wall_ms,
-        cpu_ms: run.cpu_ms,
-        peak_memory_bytes: run.peak_memory_bytes.max(0) as u64,
-        used_samples: run.used_samples.max(0) as u64,
-        metrics: run.metrics.clone(),
         pixels: existing(files_of_run.pixels()),
         log: existing(files_of_run.technique_log()),
         error_maps: metrics_with_maps
             .iter()
             .filter_map(|m| Some((m.clone(), existing(files_of_run.error_map(m))?)))
             .collect(),
+        ..ViewerRun::measured(&run.index_entry(&run.result_id))
     }
 }

@@ -1,12 +1,12 @@
 //! `fbksd results compute` and `fbksd results show` on a real benchmark of
 //! a small procedural scene, with an external metric plugged in.
 
-use fbksd_tests::{bin, scene_meta};
+use fbksd_tests::{bin, python_path, scene_meta, sdk};
 use std::os::unix::fs::PermissionsExt;
 use std::process::Command;
 
 fn fbksd(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(bin("fbksd")).args(args).output().unwrap();
+    let o = Command::new(bin("fbksd")).args(args).env("PYTHONPATH", python_path()).output().unwrap();
     (
         o.status.success(),
         String::from_utf8_lossy(&o.stdout).into_owned(),
@@ -74,6 +74,93 @@ fn results_are_computed_incrementally_and_ranked() {
         "{table}"
     );
     assert!(table.contains("ranking") && table.lines().any(|l| l.starts_with("1  box-filter")), "{table}");
+}
+
+/// A noisy procedural scene with its reference, under `dir/scenes/noisy`.
+fn noisy_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    let scene = dir.join("scenes/noisy");
+    std::fs::create_dir_all(&scene).unwrap();
+    std::fs::write(
+        scene.join("noisy.expr"),
+        "width := 20;\nheight := 12;\n#\nvar v := IMAGE_X / width * LIGHT_X * 2;\nCOLOR_R := v; COLOR_G := v * LIGHT_Y; COLOR_B := 1 - v;\n",
+    )
+    .unwrap();
+    scene_meta(&scene, "noisy", "noisy.expr", "procedural", &[1, 4, 16], 20, 12);
+    let out = Command::new(bin("fbksd-procedural")).arg("reference").arg(&scene).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    scene
+}
+
+/// `fbksd run --repeats 3`: each run is made with seeds 0, 1 and 2, whose
+/// images differ; the index carries every repeat, each value's confidence
+/// interval and the times' spread; the Rust and the Python box filter
+/// (the same filter, equal to float rounding) tie in every cell instead of
+/// ranking 1st and 2nd on rounding; the tables show intervals, ties and the
+/// equal-time ranking.
+#[test]
+fn repeated_runs_carry_intervals_and_equal_techniques_tie() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = noisy_scene(dir.path());
+    let results = dir.path().join("results");
+    let python_box = format!("python={}", sdk("techniques/box-filter-python/box_filter.py").display());
+    let rust_box = format!("rust={}", bin("box-filter"));
+    let r = results.to_str().unwrap();
+    let (ok, summary, err) = fbksd(&[
+        "run",
+        "-t",
+        &rust_box,
+        "-t",
+        &python_box,
+        "-s",
+        scene.to_str().unwrap(),
+        "--repeats",
+        "3",
+        "--results",
+        r,
+    ]);
+    assert!(ok, "{err}");
+    assert!(summary.lines().filter(|l| l.starts_with("noisy")).count() == 2 * 3 * 3, "{summary}");
+    let seed = |k: u32| fbksd_iqa::image::read_exr(&results.join(format!("rust/noisy/4_{k}.exr"))).unwrap().2;
+    assert_ne!(seed(0), seed(1), "another seed, other samples");
+    assert_ne!(seed(1), seed(2));
+
+    let s = dir.path().join("scenes");
+    let (ok, _, err) =
+        fbksd(&["results", "compute", "--results", r, "--scenes", s.to_str().unwrap(), "--metrics", "MSE,rMSE"]);
+    assert!(ok, "{err}");
+    assert!(err.contains("36 values computed"), "{err}");
+    let index: serde_json::Value = serde_json::from_slice(&std::fs::read(results.join("index.json")).unwrap()).unwrap();
+    for run in index["runs"].as_array().unwrap() {
+        let what = format!("{} at {} spp", run["technique"], run["spp"]);
+        let seeds: Vec<u64> = run["repeats"].as_array().unwrap().iter().map(|r| r["seed"].as_u64().unwrap()).collect();
+        assert_eq!(seeds, [0, 1, 2], "{what}");
+        let mse = &run["intervals"]["MSE"];
+        let (low, mean, high) =
+            (mse["low"].as_f64().unwrap(), mse["mean"].as_f64().unwrap(), mse["high"].as_f64().unwrap());
+        assert!(low < mean && mean < high && mean == run["metrics"]["MSE"].as_f64().unwrap(), "{what}: {mse}");
+        let timing = &run["timing"]["technique"];
+        assert!(timing["min"].as_f64() <= timing["median"].as_f64() && timing["cv"].as_f64().unwrap() >= 0.0, "{what}");
+        assert!(run["time_ms"].as_f64().unwrap() > 0.0, "{what}");
+    }
+    // Every equal-spp cell: the two box filters tie, sharing places 1 and 2.
+    let cells = index["rankings"]["equal_spp"]["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 3 * 2);
+    for cell in cells {
+        let places: Vec<f64> =
+            cell["places"].as_array().unwrap().iter().map(|p| p["place"].as_f64().unwrap()).collect();
+        assert_eq!(places, [1.5, 1.5], "{cell}");
+    }
+    let standings = index["rankings"]["equal_spp"]["standings"].as_array().unwrap();
+    assert!(standings.iter().all(|s| s["mean_rank"] == 1.5 && s["tied"] == 6), "{standings:?}");
+    // Equal time is ranked too (the Python filter, slower to start, cannot
+    // answer at the Rust one's 1 spp time: it ranks last there).
+    assert!(!index["rankings"]["equal_time"]["cells"].as_array().unwrap().is_empty());
+
+    let (ok, table, err) = fbksd(&["results", "show", "--results", r]);
+    assert!(ok, "{err}");
+    assert!(table.contains(" ± ") && table.contains(" =") && table.contains("technique ms (CV)"), "{table}");
+    assert!(table.contains("noisy at equal time") && table.contains("mean rank (equal time)"), "{table}");
+    assert!(table.lines().any(|l| l.starts_with("1  python") || l.starts_with("1  rust")), "{table}");
 }
 
 #[test]

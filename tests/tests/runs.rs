@@ -28,6 +28,7 @@ fn bench(dir: &Path, techniques: Vec<TechniqueSpec>, spps: &[u64], flags: &[&str
         results: dir.join("results"),
         limits: limits(limit_s),
         launcher: std::sync::Arc::new(fbksd_manager::LocalLauncher),
+        repeats: 1,
     }
     .run(|_| {})
     .unwrap()
@@ -232,4 +233,40 @@ fn a_connection_without_the_session_token_is_refused() {
     assert_status(&records[0], RunStatus::NoResult, "");
     let log = std::fs::read_to_string(dir.path().join("results/no-token/analytic/1_0_technique.log")).unwrap();
     assert!(log.contains("FBKSD_SESSION missing or wrong"), "{log}");
+}
+
+/// Work a technique does while it holds no tile is its own time: burning
+/// CPU in another thread while the renderer renders is charged (not hidden
+/// in the renderer's time), and so is sleeping before a request; a
+/// technique that merely waits is not charged for the wait.
+#[test]
+fn work_outside_tile_callbacks_is_charged_to_the_technique() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = bench(
+        dir.path(),
+        vec![technique("idle-while-waiting"), technique("burn-while-waiting"), technique("sleep-before-request")],
+        &[1],
+        &["--fault", "slow-ms=1500"],
+        60,
+    );
+    let by = |mode: &str| records.iter().find(|r| r.technique == mode).unwrap();
+    for r in &records {
+        assert_status(r, RunStatus::Ok, "");
+    }
+    let idle = by("idle-while-waiting");
+    assert!(idle.times.waiting_ms >= 1400.0, "{:?}", idle.times);
+    assert!(idle.times.technique_ms < 700.0, "an idle wait is not the technique's time: {:?}", idle.times);
+    assert!(idle.times.background_cpu_ms < 200.0, "{:?}", idle.times);
+    // The burnt second is charged whether it overlaps the wait (as CPU time)
+    // or outlasts it (as wall time, the technique then waits for its thread).
+    let burn = by("burn-while-waiting");
+    assert!(burn.times.background_cpu_ms >= 100.0, "the burn during the wait is seen: {:?}", burn.times);
+    assert!(
+        burn.times.technique_ms >= idle.times.technique_ms + 900.0,
+        "the burnt second is charged: {:?} against idle {:?}",
+        burn.times,
+        idle.times
+    );
+    let sleep = by("sleep-before-request");
+    assert!(sleep.times.technique_ms >= 1000.0, "a sleep outside a request is charged: {:?}", sleep.times);
 }

@@ -156,7 +156,7 @@ fn renderer_messages() {
                    "ring": {"session": 2, "slot_count": 4, "slot_bytes": 4096}}),
         ),
         (
-            ToRenderer::Evaluate { spp: 2, remaining: 5, pipe_size: 1024, input: false, request: 0 },
+            ToRenderer::Evaluate { spp: 2, remaining: 5, pipe_size: 1024, input: false, request: 0, seed: 0 },
             json!({"type": "evaluate", "spp": 2, "remaining": 5, "pipe_size": 1024, "input": false, "request": 0}),
         ),
         (ToRenderer::Granted { id: 9, slot: 3 }, json!({"type": "granted", "id": 9, "slot": 3})),

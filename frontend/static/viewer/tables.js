@@ -1,61 +1,44 @@
 // FBKSD results viewer: tables. The ranking over the selected scenes and
-// one metric (the rule of sdk/exchange/src/ranking.rs: the mean of each
-// technique's rank in every (scene, spp) group, ties sharing the mean of
-// their places, a missing value counting as last) with a techniques ×
-// scenes grid of per-scene mean ranks; and each run's costs.
+// one metric, at equal samples and at equal time: the document carries
+// every ranking cell (sdk/exchange/src/ranking.rs decides places and ties:
+// differences within the noise of the repeats tie, a missing value ranks
+// last), and this averages the places over the scenes shown, with a
+// techniques × scenes grid of per-scene mean ranks; and each run's costs,
+// values with their confidence intervals, times with their spread.
 "use strict";
 (function () {
   const FBKSD = (window.FBKSD = window.FBKSD || {});
 
-  // Ranks: {overall: Map key→mean rank, perScene: Map scene→Map key→mean rank}.
-  FBKSD.rank = function (doc, scenes, metric) {
-    const info = doc.metrics.find((m) => m.acronym === metric);
-    const lower = !info || info.lower_is_better;
-    const keys = doc.techniques.map((t) => t.key);
-    const n = keys.length;
-    const groups = new Map(); // scene|spp → [[key, value]]
-    for (const t of doc.techniques) {
-      for (const r of t.runs) {
-        if (!scenes.has(r.scene)) continue;
-        const id = r.scene + "|" + r.spp;
-        if (!groups.has(id)) groups.set(id, { scene: r.scene, values: [] });
-        const v = r.metrics[metric];
-        if (typeof v === "number" && !isNaN(v)) groups.get(id).values.push([t.key, v]);
-      }
-    }
-    const sums = new Map(), perScene = new Map();
+  // Ranks from the document's cells of `kind` ("equal_spp" or "equal_time"):
+  // {overall: Map key→mean rank, perScene: Map scene→Map key→mean rank,
+  //  ties: Map key→cells tied}.
+  FBKSD.rank = function (doc, scenes, metric, kind) {
+    const n = doc.techniques.length;
+    const cells = ((doc.rankings && doc.rankings[kind || "equal_spp"]) || []).filter((c) => c.metric === metric && scenes.has(c.scene));
+    const sums = new Map(), perScene = new Map(), ties = new Map();
     const add = (map, key, rank) => {
       const e = map.get(key) || { sum: 0, count: 0 };
       e.sum += rank;
       e.count += 1;
       map.set(key, e);
     };
-    for (const { scene, values } of groups.values()) {
-      values.sort((a, b) => (lower ? a[1] - b[1] : b[1] - a[1]));
-      if (!perScene.has(scene)) perScene.set(scene, new Map());
-      const present = new Set();
-      for (let i = 0; i < values.length; ) {
-        let j = i;
-        while (j + 1 < values.length && values[j + 1][1] === values[i][1]) j++;
-        const shared = (i + j) / 2 + 1;
-        for (let k = i; k <= j; k++) {
-          add(sums, values[k][0], shared);
-          add(perScene.get(scene), values[k][0], shared);
-          present.add(values[k][0]);
-        }
-        i = j + 1;
+    for (const c of cells) {
+      if (!perScene.has(c.scene)) perScene.set(c.scene, new Map());
+      for (const p of c.places) {
+        add(sums, p.technique, p.place);
+        add(perScene.get(c.scene), p.technique, p.place);
+        if (p.tied_with && p.tied_with.length) ties.set(p.technique, (ties.get(p.technique) || 0) + 1);
       }
-      for (const key of keys) {
-        if (!present.has(key)) {
-          add(sums, key, n);
-          add(perScene.get(scene), key, n);
-        }
+      for (const key of c.missing) {
+        add(sums, key, n);
+        add(perScene.get(c.scene), key, n);
       }
     }
     const mean = (map) => new Map([...map].map(([k, e]) => [k, e.sum / e.count]));
     return {
       overall: mean(sums),
       perScene: new Map([...perScene].map(([s, m]) => [s, mean(m)])),
+      ties,
     };
   };
 
@@ -79,18 +62,25 @@
   }
 
   FBKSD.drawRanking = function (table, doc, scenes, metric) {
-    const { overall, perScene } = FBKSD.rank(doc, new Set(scenes), metric);
+    const { overall, perScene, ties } = FBKSD.rank(doc, new Set(scenes), metric, "equal_spp");
+    const atTime = FBKSD.rank(doc, new Set(scenes), metric, "equal_time").overall;
     const n = doc.techniques.length;
     const order = [...doc.techniques].sort((a, b) => (overall.get(a.key) ?? n) - (overall.get(b.key) ?? n) || a.name.localeCompare(b.name));
     const head = document.createElement("tr");
-    head.append(cell("th", "#"), cell("th", "Technique"), cell("th", "Mean rank"));
+    head.append(cell("th", "#"), cell("th", "Technique"), cell("th", "Mean rank (equal spp)"), cell("th", "Mean rank (equal time)"), cell("th", "Ties"));
     for (const s of scenes) head.append(cell("th", s, "scene"));
     const body = order.map((t, i) => {
       const row = document.createElement("tr");
       row.dataset.key = t.key;
       if (t.key === doc.highlight) row.className = "highlight";
-      const rank = overall.get(t.key);
-      row.append(cell("td", String(i + 1)), cell("td", FBKSD.techniqueLabel(t)), cell("td", rank === undefined ? "–" : rank.toFixed(2), "num"));
+      const rank = overall.get(t.key), time = atTime.get(t.key);
+      row.append(
+        cell("td", String(i + 1)),
+        cell("td", FBKSD.techniqueLabel(t)),
+        cell("td", rank === undefined ? "–" : rank.toFixed(2), "num"),
+        cell("td", time === undefined ? "–" : time.toFixed(2), "num"),
+        cell("td", String(ties.get(t.key) || 0), "num")
+      );
       for (const s of scenes) {
         const r = perScene.get(s) && perScene.get(s).get(t.key);
         const c = cell("td", r === undefined ? "–" : r.toFixed(1), "num rank");
@@ -121,7 +111,7 @@
 
   FBKSD.drawCosts = function (table, doc, scene) {
     const head = document.createElement("tr");
-    for (const h of ["Technique", "spp", "Status", "Technique time", "Render time", "Wall", "CPU time", "Peak memory", "Samples", ...doc.metrics.map((m) => m.acronym), "Log"]) {
+    for (const h of ["Technique", "spp", "Status", "Seeds", "Technique time", "Time to result", "Render time", "Wall", "CPU time", "Peak memory", "Samples", ...doc.metrics.map((m) => m.acronym), "Log"]) {
       head.append(cell("th", h));
     }
     const rows = [];
@@ -132,12 +122,17 @@
         const status = cell("td", r.status, r.status === "ok" ? "ok" : "error");
         if (r.message) status.title = r.message;
         row.append(cell("td", FBKSD.techniqueLabel(t)), cell("td", String(r.spp), "num"), status);
-        for (const v of [ms(r.technique_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
+        const cv = r.timing && r.seeds > 1 ? " (CV " + (r.timing.technique.cv * 100).toFixed(1) + " %)" : "";
+        for (const v of [String(r.seeds || 1), ms(r.technique_ms) + cv, ms(r.time_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
           row.append(cell("td", v, "num"));
         }
         for (const m of doc.metrics) {
           const v = r.metrics[m.acronym];
-          row.append(cell("td", typeof v === "number" ? FBKSD.numberText(v) : "–", "num"));
+          const i = r.intervals && r.intervals[m.acronym];
+          const text = typeof v !== "number" ? "–" : i ? FBKSD.numberText(v) + " ± " + FBKSD.numberText((i.high - i.low) / 2) : FBKSD.numberText(v);
+          const c = cell("td", text, "num");
+          if (i) c.title = "95 % confidence interval over " + i.n + " seeds: " + FBKSD.numberText(i.low) + " … " + FBKSD.numberText(i.high);
+          row.append(c);
         }
         const log = cell("td", "");
         if (r.log) {
@@ -154,7 +149,7 @@
           why.className = "message";
           why.append(cell("td", ""), cell("td", ""));
           const text = cell("td", r.message, "error");
-          text.colSpan = 8 + doc.metrics.length;
+          text.colSpan = 10 + doc.metrics.length;
           why.append(text);
           rows.push(why);
         }

@@ -53,7 +53,7 @@
         cropSize: 32,
         metric: doc.metrics[0] ? doc.metrics[0].acronym : null,
         chartX: "spp",
-        measure: "technique",
+        measure: "result",
         tag: "",
         hidden: new Set(),
       };

@@ -96,10 +96,14 @@ pub enum Fault {
     HangLayout,
     /// Deliver the first tile twice instead of the second.
     Duplicate,
+    /// Take this many milliseconds before rendering each request (a slow
+    /// renderer, for the tests of what a technique does while it waits).
+    SlowMs(u64),
 }
 
 impl Fault {
-    /// Parses `crash-at-spp=N`, `short`, `hang` or `exit-at-start`.
+    /// Parses `crash-at-spp=N`, `slow-ms=N`, `short`, `hang`, `exit-at-start`,
+    /// `hang-layout` or `duplicate`.
     pub fn parse(s: &str) -> Result<Fault, String> {
         match s {
             "short" => Ok(Fault::Short),
@@ -107,9 +111,16 @@ impl Fault {
             "exit-at-start" => Ok(Fault::ExitAtStart),
             "hang-layout" => Ok(Fault::HangLayout),
             "duplicate" => Ok(Fault::Duplicate),
-            _ => s.strip_prefix("crash-at-spp=").and_then(|n| n.parse().ok()).map(Fault::CrashAtSpp).ok_or_else(|| {
-                format!("unknown fault {s:?} (crash-at-spp=N, short, hang, exit-at-start, hang-layout, duplicate)")
-            }),
+            _ => s
+                .strip_prefix("crash-at-spp=")
+                .and_then(|n| n.parse().ok())
+                .map(Fault::CrashAtSpp)
+                .or_else(|| s.strip_prefix("slow-ms=").and_then(|n| n.parse().ok()).map(Fault::SlowMs))
+                .ok_or_else(|| {
+                    format!(
+                        "unknown fault {s:?} (crash-at-spp=N, slow-ms=N, short, hang, exit-at-start, hang-layout, duplicate)"
+                    )
+                }),
         }
     }
 }
@@ -242,6 +253,7 @@ pub fn evaluate(
         Some(Fault::Hang) => loop {
             std::thread::sleep(std::time::Duration::from_secs(3600));
         },
+        Some(Fault::SlowMs(ms)) => std::thread::sleep(std::time::Duration::from_millis(ms)),
         _ => {}
     }
     let mut plan = eval.plan();

@@ -15,7 +15,7 @@ use anyhow::Context;
 use base64::Engine;
 use fbksd_exchange::results::{IndexEntry, ResultsDir, RunFiles};
 use fbksd_exchange::scenes::SceneMeta;
-use fbksd_exchange::viewer::{Delivery, ViewerData, ViewerRun, ViewerScene, ViewerTechnique, ASSETS};
+use fbksd_exchange::viewer::{Delivery, Rankings, ViewerData, ViewerRun, ViewerScene, ViewerTechnique, ASSETS};
 use fbksd_exchange::MetricInfo;
 use fbksd_iqa::image::Image;
 use fbksd_iqa::Metric;
@@ -80,6 +80,9 @@ pub fn write(results: &ResultsDir, scenes: &BTreeMap<String, SceneMeta>, out: &P
             runs,
         });
     }
+    let lower_is_better =
+        |acronym: &str| doc.metrics.iter().find(|m| m.acronym == acronym).is_none_or(|m| m.lower_is_better);
+    doc.rankings = Rankings::of(&index.runs, lower_is_better);
     let json = serde_json::to_string(&doc)?;
     std::fs::write(out.join("data.js"), format!("window.FBKSD_DOCUMENT = {json};\n"))?;
     std::fs::write(out.join("index.html"), index_html(&doc.title))?;
@@ -116,7 +119,7 @@ impl Page<'_> {
     }
 
     fn run(&mut self, root: &Path, r: &IndexEntry, metrics: &[MetricInfo]) -> anyhow::Result<ViewerRun> {
-        let files = RunFiles { spp: r.spp };
+        let files = RunFiles::first(r.spp);
         let dir = Path::new(&r.log).parent().map(Path::to_path_buf).unwrap_or_default();
         let pixels = match &r.image {
             Some(image) if r.status == fbksd_exchange::RunStatus::Ok => {
@@ -142,20 +145,10 @@ impl Page<'_> {
             }
         }
         Ok(ViewerRun {
-            scene: r.scene.clone(),
-            spp: r.spp,
-            status: r.status,
-            message: r.message.clone(),
-            technique_ms: r.technique_ms,
-            render_ms: r.render_ms,
-            wall_ms: r.wall_ms,
-            cpu_ms: r.cpu_ms,
-            peak_memory_bytes: r.peak_memory_bytes,
-            used_samples: r.used_samples,
-            metrics: r.metrics.clone(),
             pixels,
             log: self.copy(root, &dir.join(files.technique_log()))?,
             error_maps,
+            ..ViewerRun::measured(r)
         })
     }
 }

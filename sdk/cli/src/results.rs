@@ -3,12 +3,12 @@
 
 use anyhow::Context;
 use clap::Subcommand;
-use fbksd_exchange::ranking::rank;
+use fbksd_exchange::ranking::{equal_spp, equal_time, At, Cell};
 use fbksd_exchange::results::ResultsDir;
 use fbksd_iqa::external::ExternalMetric;
 use fbksd_iqa::Metric;
 use fbksd_manager::evaluation::{compute, find_scenes, AnyMetric};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 #[derive(Subcommand)]
@@ -66,9 +66,7 @@ pub fn results(command: ResultsCommand) -> anyhow::Result<()> {
             for d in &metric_dirs {
                 chosen.push(AnyMetric::External(ExternalMetric::load(d)?));
             }
-            let summary = compute(&dir, &scenes, &chosen, |run, metric| {
-                eprintln!("  {} / {} / {} spp: {metric}", run.technique, run.scene, run.spp)
-            })?;
+            let summary = compute(&dir, &scenes, &chosen, |run, metric| eprintln!("  {run}: {metric}"))?;
             for s in &summary.skipped {
                 eprintln!("skipped {s}");
             }
@@ -113,30 +111,100 @@ fn show(results: &std::path::Path) -> anyhow::Result<()> {
     let mut metrics: Vec<String> = index.runs.iter().flat_map(|r| r.metrics.keys().cloned()).collect();
     metrics.sort();
     metrics.dedup();
+    let at_spp = equal_spp(&index.runs, lower_is_better);
+    let at_time = equal_time(&index.runs, lower_is_better);
+    let tied = |cells: &[Cell], scene: &str, at: &At, metric: &str, technique: &str| {
+        cells
+            .iter()
+            .find(|c| c.scene == scene && c.at == *at && c.metric == metric)
+            .and_then(|c| c.places.iter().find(|p| p.technique == technique))
+            .is_some_and(|p| !p.tied_with.is_empty())
+    };
     let mut by_scene: BTreeMap<&str, Vec<_>> = BTreeMap::new();
     for r in &index.runs {
         by_scene.entry(r.scene.as_str()).or_default().push(r);
     }
+    let arrow = |m: &str| if lower_is_better(m) { "↓" } else { "↑" };
     for (scene, mut runs) in by_scene {
         runs.sort_by(|a, b| (a.spp, &a.technique).cmp(&(b.spp, &b.technique)));
         println!("\n{scene}");
-        let mut header = vec!["technique".to_string(), "spp".into(), "status".into()];
-        header.extend(metrics.iter().map(|m| format!("{m} {}", if lower_is_better(m) { "↓" } else { "↑" })));
-        header.push("technique ms".into());
+        let mut header = vec!["technique".to_string(), "spp".into(), "seeds".into(), "status".into()];
+        header.extend(metrics.iter().map(|m| format!("{m} {}", arrow(m))));
+        header.extend(["technique ms (CV)".into(), "time to result ms".into()]);
         let rows: Vec<Vec<String>> = runs
             .iter()
             .map(|r| {
-                let mut row = vec![r.technique.clone(), r.spp.to_string(), r.status.to_string()];
-                row.extend(metrics.iter().map(|m| r.metrics.get(m).map_or("—".into(), |v| format!("{v:.6}"))));
-                row.push(format!("{:.1}", r.technique_ms));
+                let mut row = vec![
+                    r.technique.clone(),
+                    r.spp.to_string(),
+                    r.repeats.len().max(1).to_string(),
+                    r.status.to_string(),
+                ];
+                let at = At::Spp { spp: r.spp };
+                row.extend(metrics.iter().map(|m| {
+                    let Some(v) = r.metrics.get(m) else { return "—".into() };
+                    let value = match r.intervals.get(m) {
+                        Some(i) => format!("{v:.6} ± {:.1e}", i.half_width()),
+                        None => format!("{v:.6}"),
+                    };
+                    if tied(&at_spp.cells, scene, &at, m, &r.technique) {
+                        format!("{value} =")
+                    } else {
+                        value
+                    }
+                }));
+                row.push(match r.timing.filter(|_| r.repeats.len() > 1) {
+                    Some(t) => format!("{:.1} ({:.1} %)", r.technique_ms, t.technique.cv * 100.0),
+                    None => format!("{:.1}", r.technique_ms),
+                });
+                row.push(format!("{:.1}", r.time()));
                 row
             })
             .collect();
         print_table(&header, &rows);
+        // Equal time: each technique's error at the fastest technique's time at each budget.
+        let mut points: Vec<&At> = at_time.cells.iter().filter(|c| c.scene == scene).map(|c| &c.at).collect();
+        points.dedup();
+        if points.is_empty() {
+            continue;
+        }
+        println!("\n{scene} at equal time (error read off each technique's curve at the fastest one's time)");
+        let mut header = vec!["time ms".to_string(), "fastest".into(), "technique".into()];
+        header.extend(metrics.iter().map(|m| format!("{m} {}", arrow(m))));
+        let mut rows = Vec::new();
+        for at in points {
+            let At::Time { ms, fastest, spp } = at else { continue };
+            let cells: Vec<&Cell> = at_time.cells.iter().filter(|c| c.scene == scene && c.at == *at).collect();
+            let techniques: BTreeSet<&str> = cells
+                .iter()
+                .flat_map(|c| c.places.iter().map(|p| p.technique.as_str()).chain(c.missing.iter().map(String::as_str)))
+                .collect();
+            for technique in techniques {
+                let mut row = vec![format!("{ms:.1}"), format!("{fastest} at {spp} spp"), technique.to_string()];
+                row.extend(metrics.iter().map(|m| {
+                    let place = cells
+                        .iter()
+                        .find(|c| c.metric == *m)
+                        .and_then(|c| c.places.iter().find(|p| p.technique == technique));
+                    match place {
+                        Some(p) if p.tied_with.is_empty() => format!("{:.6} (#{})", p.mean, p.place),
+                        Some(p) => format!("{:.6} (#{} =)", p.mean, p.place),
+                        None => "— (too slow)".into(),
+                    }
+                }));
+                rows.push(row);
+            }
+        }
+        print_table(&header, &rows);
     }
-    let standings = rank(&index.runs, lower_is_better);
-    println!("\nranking (mean rank over scene × spp × metric; a missing value ranks last)");
-    let rows: Vec<Vec<String>> = standings
+    let time_rank: BTreeMap<&str, f64> =
+        at_time.standings.iter().map(|s| (s.technique.as_str(), s.mean_rank)).collect();
+    println!(
+        "\nranking (mean rank over scene × spp × metric, and over scene × time point × metric at equal time; \
+         differences within the noise of the repeats tie (=); a missing value ranks last)"
+    );
+    let rows: Vec<Vec<String>> = at_spp
+        .standings
         .iter()
         .enumerate()
         .map(|(i, s)| {
@@ -144,12 +212,28 @@ fn show(results: &std::path::Path) -> anyhow::Result<()> {
                 (i + 1).to_string(),
                 s.technique.clone(),
                 format!("{:.3}", s.mean_rank),
+                time_rank
+                    .get(s.technique.as_str())
+                    .filter(|r| r.is_finite())
+                    .map_or("—".into(), |r| format!("{r:.3}")),
+                s.tied.to_string(),
                 s.ranked.to_string(),
                 s.missing.to_string(),
             ]
         })
         .collect();
-    print_table(&["#".into(), "technique".into(), "mean rank".into(), "ranked".into(), "missing".into()], &rows);
+    print_table(
+        &[
+            "#".into(),
+            "technique".into(),
+            "mean rank (equal spp)".into(),
+            "mean rank (equal time)".into(),
+            "ties".into(),
+            "ranked".into(),
+            "missing".into(),
+        ],
+        &rows,
+    );
     Ok(())
 }
 

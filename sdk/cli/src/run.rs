@@ -31,6 +31,11 @@ pub struct RunArgs {
     /// Wall-time limit of each run (e.g. 90s, 10m, 2h); 0 for none.
     #[arg(long, default_value = "30m", value_parser = humantime::parse_duration)]
     time_limit: Duration,
+    /// Make each run this many times, with the renderer's sample seeds 0,
+    /// 1, …: metric values then carry confidence intervals, times their
+    /// spread, and the ranking ties what the noise cannot tell apart.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    repeats: u32,
 }
 
 fn technique_spec(arg: &str) -> anyhow::Result<TechniqueSpec> {
@@ -101,6 +106,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         results: args.results.clone(),
         limits,
         launcher: std::sync::Arc::new(fbksd_manager::LocalLauncher),
+        repeats: args.repeats,
     };
     let live = std::io::stderr().is_terminal();
     let records = benchmark.run(|p| report(p, live))?;
@@ -114,7 +120,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
 
 fn report(progress: Progress<'_>, live: bool) {
     match progress {
-        Progress::RunStarted { scene, technique, spp } => eprintln!("▶ {scene} · {technique} · {spp} spp"),
+        Progress::RunStarted { scene, technique, spp, repeat: 0 } => eprintln!("▶ {scene} · {technique} · {spp} spp"),
+        Progress::RunStarted { scene, technique, spp, repeat } => {
+            eprintln!("▶ {scene} · {technique} · {spp} spp · seed {repeat}")
+        }
         Progress::Samples { delivered, budget } if live => {
             eprint!("\r  {delivered} / {budget} samples ({:.0}%)   ", delivered as f64 * 100.0 / budget.max(1) as f64)
         }
@@ -131,14 +140,16 @@ fn report(progress: Progress<'_>, live: bool) {
 }
 
 fn print_summary(records: &[RunRecord]) {
-    let header = ["scene", "technique", "spp", "status", "technique ms", "render ms", "wall ms", "samples", "peak MB"];
-    let rows: Vec<[String; 9]> = records
+    let header =
+        ["scene", "technique", "spp", "seed", "status", "technique ms", "render ms", "wall ms", "samples", "peak MB"];
+    let rows: Vec<[String; 10]> = records
         .iter()
         .map(|r| {
             [
                 r.scene.clone(),
                 r.technique.clone(),
                 r.spp_budget.to_string(),
+                r.seed.to_string(),
                 r.status.to_string(),
                 format!("{:.1}", r.times.technique_ms),
                 format!("{:.1}", r.times.render_ms),

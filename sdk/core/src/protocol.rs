@@ -222,6 +222,10 @@ pub enum ToRenderer {
         input: bool,
         /// Index of this request in the session, for seeding.
         request: u64,
+        /// The run's sample seed: repeats of a run differ only in it. 0 (the
+        /// default, left out on the wire) is every run's first repeat.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        seed: u64,
     },
     /// Answer to `acquire`: the pipe `id` may write `slot`.
     Granted {
@@ -292,6 +296,10 @@ pub enum FrameError {
         /// The start of the frame, for the log.
         text: String,
     },
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 /// Writes one message as a frame (a single `write_all`).

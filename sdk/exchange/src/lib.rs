@@ -12,7 +12,9 @@
 //! - [`scenes`]: scene metadata, scene digests and the reference-cache rule.
 //! - [`technique`]: a technique repository's `info.json`.
 //! - [`environments`]: what each environment a technique builds in holds.
-//! - [`ranking`]: techniques ranked by mean rank over the index.
+//! - [`stats`]: intervals and spreads over a run's repeats, the paired test.
+//! - [`ranking`]: techniques ranked by mean rank over the index, at equal
+//!   samples and at equal time, with ties where differences are noise.
 //! - [`runner_api`]: the messages of the runner API, job kinds and states.
 //! - [`pixels`]: the viewer's pixel files (exact floats, small on the wire).
 //! - [`viewer`]: the results viewer's document.
@@ -25,6 +27,7 @@ pub mod record;
 pub mod results;
 pub mod runner_api;
 pub mod scenes;
+pub mod stats;
 pub mod technique;
 pub mod viewer;
 

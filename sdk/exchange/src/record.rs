@@ -110,14 +110,22 @@ impl fmt::Display for RunStatus {
 /// `technique` is the honest one: wall time from starting the technique to
 /// its result, minus the time it spent waiting for the renderer (inside a
 /// request with no tile in its hands, or while the renderer accepts its
-/// layout). Start-up is included (loading a model is part of a technique's
-/// cost) and also reported alone.
+/// layout), plus the CPU time it used while waiting (`background_cpu_ms`).
+/// Start-up is included (loading a model is part of a technique's cost) and
+/// also reported alone. `technique_ms + waiting_ms − background_cpu_ms` is
+/// the wall time: what the result cost, renderer included, which is the
+/// time of the equal-time comparison.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Times {
     /// Technique time: `wall − waiting`.
     pub technique_ms: f64,
     /// Time the technique waited for the renderer.
     pub waiting_ms: f64,
+    /// CPU time the technique used while it waited (work in other threads
+    /// while it held no tile), charged to `technique_ms`: work cannot hide
+    /// in the renderer's time.
+    #[serde(default)]
+    pub background_cpu_ms: f64,
     /// Time the renderer spent on requests: from each request to the
     /// renderer's `evaluate_done`. It includes time the renderer waited for
     /// a free slot, i.e. for the technique to consume tiles.
@@ -170,6 +178,12 @@ pub struct RunRecord {
     pub image: Option<String>,
     /// The technique's output, relative to the log's directory.
     pub technique_log: String,
+    /// The renderer's sample seed (0 for a run's first repeat).
+    #[serde(default)]
+    pub seed: u64,
+    /// Which repeat of the (technique, scene, budget) this is (0 first).
+    #[serde(default)]
+    pub repeat: u32,
 }
 
 #[cfg(test)]

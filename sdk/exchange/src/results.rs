@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! <results>/index.json                              every run, one entry each
-//! <results>/<technique>/<scene>/<spp>_0.exr         result image (32-bit float, scanline)
+//! <results>/<technique>/<scene>/<spp>_<k>.exr         result image of repeat k (32-bit float, scanline)
 //! <results>/<technique>/<scene>/<spp>_0.fbpx        the same pixels for the viewer (`crate::pixels`)
 //! <results>/<technique>/<scene>/<spp>_0_log.json    the run's RunRecord
 //! <results>/<technique>/<scene>/<spp>_0_technique.log   the technique's stdout and stderr
@@ -11,13 +11,24 @@
 //! <results>/renderer-logs/<scene>.log               the renderer's stdout and stderr
 //! ```
 //!
-//! File names follow the original FBKSD (`<spp>_0.exr`, `<spp>_0_log.json`)
-//! and are spelled only here ([`RunFiles`]).
+//! File names follow the original FBKSD (`<spp>_0.exr`, `<spp>_0_log.json`,
+//! where 0 is the run number: here, the repeat) and are spelled only here
+//! ([`RunFiles`]). Every file listed with `_0` exists for each repeat `k`
+//! but the pixel file and the error maps, which only the first repeat has.
+//!
+//! A run may be repeated with other sample seeds (`fbksd run --repeats`):
+//! its index entry then holds every repeat ([`Repeat`]) and sums them up:
+//! each metric's mean with its confidence interval ([`Interval`]), each
+//! time's median with its spread ([`Spread`]), and the status of the first
+//! repeat that failed.
 //! The index is rewritten atomically after every run, so an interrupted
 //! benchmark keeps every finished run.
 
+use crate::ranking::Ranking;
 use crate::record::{RunRecord, RunStatus};
+use crate::stats::{Interval, Samples, Spread};
 use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
 use std::io;
 use std::path::{Path, PathBuf};
 
@@ -28,38 +39,45 @@ pub const INDEX_FORMAT: &str = "fbksd-results";
 /// Version of the index format.
 pub const INDEX_VERSION: u32 = 1;
 
-/// The file names of one run in its `<technique>/<scene>/` directory. The
-/// `_0` is the original's run number: one run per budget.
+/// The file names of one repeat of a run in its `<technique>/<scene>/`
+/// directory. The number after the budget is the original's run number,
+/// here the repeat (0 for a run made once).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RunFiles {
     /// The run's budget in samples per pixel.
     pub spp: u64,
+    /// The repeat.
+    pub repeat: u32,
 }
 
 impl RunFiles {
+    /// The files of a run's first (or only) repeat.
+    pub fn first(spp: u64) -> RunFiles {
+        RunFiles { spp, repeat: 0 }
+    }
     /// The result image.
     pub fn image(self) -> String {
-        format!("{}_0.exr", self.spp)
+        format!("{}_{}.exr", self.spp, self.repeat)
     }
     /// The run's [`RunRecord`].
     pub fn log(self) -> String {
-        format!("{}_0_log.json", self.spp)
+        format!("{}_{}_log.json", self.spp, self.repeat)
     }
     /// The result's pixels for the viewer ([`crate::pixels`]).
     pub fn pixels(self) -> String {
-        format!("{}_0.{}", self.spp, crate::pixels::EXTENSION)
+        format!("{}_{}.{}", self.spp, self.repeat, crate::pixels::EXTENSION)
     }
     /// The technique's stdout and stderr.
     pub fn technique_log(self) -> String {
-        format!("{}_0_technique.log", self.spp)
+        format!("{}_{}_technique.log", self.spp, self.repeat)
     }
     /// A metric's value record.
     pub fn metric_value(self, metric: &str) -> String {
-        format!("{}_0_{metric}.json", self.spp)
+        format!("{}_{}_{metric}.json", self.spp, self.repeat)
     }
     /// A metric's error map.
     pub fn error_map(self, metric: &str) -> String {
-        format!("{}_0_{metric}_map.png", self.spp)
+        format!("{}_{}_{metric}_map.png", self.spp, self.repeat)
     }
 }
 
@@ -112,9 +130,226 @@ pub struct IndexEntry {
     pub peak_memory_bytes: u64,
     /// Samples used.
     pub used_samples: u64,
-    /// Metric values by acronym (filled by `fbksd results compute`).
+    /// Metric values by acronym (filled by `fbksd results compute`): the
+    /// mean over the repeats.
     #[serde(default)]
-    pub metrics: std::collections::BTreeMap<String, f64>,
+    pub metrics: BTreeMap<String, f64>,
+    /// Time the technique waited for the renderer, in ms.
+    #[serde(default)]
+    pub waiting_ms: f64,
+    /// Time to the result in ms: the technique's time plus the time it
+    /// waited for the renderer to render the samples it asked for (the
+    /// time axis of the equal-time comparison); 0 in older indexes, where
+    /// [`IndexEntry::time`] falls back to the wall time.
+    #[serde(default)]
+    pub time_ms: f64,
+    /// Each metric's 95 % confidence interval over the repeats.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub intervals: BTreeMap<String, Interval>,
+    /// The times' spread over the repeats.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timing: Option<Timing>,
+    /// Every repeat, by repeat number (empty in indexes written before
+    /// repeats: the entry is then its only run, with seed 0).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub repeats: Vec<Repeat>,
+}
+
+/// One repeat of a run: the same technique, scene and budget with another
+/// sample seed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Repeat {
+    /// The renderer's sample seed.
+    pub seed: u64,
+    /// Typed status.
+    pub status: RunStatus,
+    /// Why (empty for ok).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub message: String,
+    /// The repeat's log, relative to the results directory.
+    pub log: String,
+    /// Its result image, relative to the results directory.
+    pub image: Option<String>,
+    /// Technique time in ms.
+    pub technique_ms: f64,
+    /// Render time in ms.
+    pub render_ms: f64,
+    /// Wall time in ms.
+    pub wall_ms: f64,
+    /// CPU time of the technique in ms.
+    pub cpu_ms: f64,
+    /// Time the technique waited for the renderer, in ms.
+    pub waiting_ms: f64,
+    /// Peak resident memory of the technique in bytes.
+    pub peak_memory_bytes: u64,
+    /// Samples used.
+    pub used_samples: u64,
+    /// Metric values by acronym.
+    #[serde(default)]
+    pub metrics: BTreeMap<String, f64>,
+}
+
+impl Repeat {
+    /// Time to the result in ms (see [`IndexEntry::time_ms`]).
+    pub fn time_ms(&self) -> f64 {
+        self.technique_ms + self.waiting_ms
+    }
+}
+
+/// How the times of a run's repeats spread.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    /// Technique time.
+    pub technique: Spread,
+    /// Time to the result (technique + waiting for the renderer).
+    pub time: Spread,
+    /// Render time.
+    pub render: Spread,
+    /// CPU time of the technique.
+    pub cpu: Spread,
+}
+
+impl IndexEntry {
+    /// An entry with nothing measured yet (and no repeat).
+    pub fn new(technique: &str, scene: &str, spp: u64) -> IndexEntry {
+        IndexEntry {
+            technique: technique.to_string(),
+            scene: scene.to_string(),
+            spp,
+            status: RunStatus::Ok,
+            message: String::new(),
+            log: String::new(),
+            image: None,
+            technique_ms: 0.0,
+            render_ms: 0.0,
+            wall_ms: 0.0,
+            cpu_ms: 0.0,
+            peak_memory_bytes: 0,
+            used_samples: 0,
+            metrics: BTreeMap::new(),
+            waiting_ms: 0.0,
+            time_ms: 0.0,
+            intervals: BTreeMap::new(),
+            timing: None,
+            repeats: Vec::new(),
+        }
+    }
+
+    /// Time to the result in ms: [`IndexEntry::time_ms`], or in older
+    /// indexes the wall time (or technique + render time before that).
+    pub fn time(&self) -> f64 {
+        if self.time_ms > 0.0 {
+            self.time_ms
+        } else if self.wall_ms > 0.0 {
+            self.wall_ms
+        } else {
+            self.technique_ms + self.render_ms
+        }
+    }
+
+    /// Turns an entry written before repeats into one with its single
+    /// repeat (seed 0).
+    pub fn upgrade(&mut self) {
+        if !self.repeats.is_empty() {
+            return;
+        }
+        self.repeats.push(Repeat {
+            seed: 0,
+            status: self.status,
+            message: self.message.clone(),
+            log: self.log.clone(),
+            image: self.image.clone(),
+            technique_ms: self.technique_ms,
+            render_ms: self.render_ms,
+            wall_ms: self.wall_ms,
+            cpu_ms: self.cpu_ms,
+            waiting_ms: (self.wall_ms - self.technique_ms).max(0.0),
+            peak_memory_bytes: self.peak_memory_bytes,
+            used_samples: self.used_samples,
+            metrics: self.metrics.clone(),
+        });
+        self.summarize();
+    }
+
+    /// The value of `metric` for each sample seed: one per `ok` repeat that
+    /// has it (the entry's own value, seed 0, in indexes without repeats).
+    pub fn samples(&self, metric: &str) -> Samples {
+        if self.repeats.is_empty() {
+            return self.metrics.get(metric).map(|v| (0, *v)).into_iter().collect();
+        }
+        self.repeats
+            .iter()
+            .filter(|r| r.status == RunStatus::Ok)
+            .filter_map(|r| r.metrics.get(metric).map(|v| (r.seed, *v)))
+            .collect()
+    }
+
+    /// Recomputes what the entry says about all its repeats: status and
+    /// message (the first failed repeat's, naming its seed), median times,
+    /// peak memory, mean metric values with their intervals, spreads.
+    /// A metric that is missing or not finite on some `ok` repeat has no
+    /// value for the run (it ranks last), and the message says where.
+    pub fn summarize(&mut self) {
+        let Some(first) = self.repeats.first() else { return };
+        self.log = first.log.clone();
+        self.image = first.image.clone();
+        let many = self.repeats.len() > 1;
+        match self.repeats.iter().find(|r| r.status != RunStatus::Ok) {
+            Some(bad) => {
+                self.status = bad.status;
+                self.message =
+                    if many { format!("repeat with seed {}: {}", bad.seed, bad.message) } else { bad.message.clone() };
+            }
+            None => {
+                self.status = RunStatus::Ok;
+                self.message.clear();
+            }
+        }
+        let column = |f: &dyn Fn(&Repeat) -> f64| -> Vec<f64> { self.repeats.iter().map(f).collect() };
+        let spread = |f: &dyn Fn(&Repeat) -> f64| Spread::of(&column(f)).expect("at least one repeat");
+        let timing = Timing {
+            technique: spread(&|r| r.technique_ms),
+            time: spread(&|r| r.time_ms()),
+            render: spread(&|r| r.render_ms),
+            cpu: spread(&|r| r.cpu_ms),
+        };
+        self.technique_ms = timing.technique.median;
+        self.time_ms = timing.time.median;
+        self.render_ms = timing.render.median;
+        self.cpu_ms = timing.cpu.median;
+        self.wall_ms = Spread::of(&column(&|r| r.wall_ms)).map_or(0.0, |s| s.median);
+        self.waiting_ms = Spread::of(&column(&|r| r.waiting_ms)).map_or(0.0, |s| s.median);
+        self.peak_memory_bytes = self.repeats.iter().map(|r| r.peak_memory_bytes).max().unwrap_or(0);
+        self.used_samples = self.repeats.iter().map(|r| r.used_samples).max().unwrap_or(0);
+        self.timing = Some(timing);
+        self.metrics.clear();
+        self.intervals.clear();
+        if self.status != RunStatus::Ok {
+            return;
+        }
+        let names: BTreeSet<&String> = self.repeats.iter().flat_map(|r| r.metrics.keys()).collect();
+        let mut problems = Vec::new();
+        for name in names {
+            let values: Vec<(u64, Option<f64>)> =
+                self.repeats.iter().map(|r| (r.seed, r.metrics.get(name).copied())).collect();
+            if let Some((seed, v)) = values.iter().find(|(_, v)| !v.is_some_and(f64::is_finite)) {
+                problems.push(match v {
+                    Some(v) => format!("{name} is {v} with seed {seed}"),
+                    None => format!("{name} is missing with seed {seed}"),
+                });
+                continue;
+            }
+            let values: Vec<f64> = values.iter().filter_map(|(_, v)| *v).collect();
+            let interval = Interval::of(&values).expect("at least one repeat");
+            self.metrics.insert(name.clone(), interval.mean);
+            if many {
+                self.intervals.insert(name.clone(), interval);
+            }
+        }
+        if !problems.is_empty() {
+            self.message = format!("no value (ranks last): {}", problems.join("; "));
+        }
+    }
 }
 
 /// The index file.
@@ -126,11 +361,34 @@ pub struct ResultsIndex {
     pub version: u32,
     /// Runs, sorted by technique, scene and spp.
     pub runs: Vec<IndexEntry>,
+    /// The techniques ranked at equal samples and at equal time, as of the
+    /// last `fbksd results compute` (dropped when a run is recorded after it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rankings: Option<IndexRankings>,
+}
+
+/// The rankings of an index.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IndexRankings {
+    /// At equal samples per pixel.
+    pub equal_spp: Ranking,
+    /// At equal time to the result.
+    pub equal_time: Ranking,
 }
 
 impl Default for ResultsIndex {
     fn default() -> Self {
-        ResultsIndex { format: INDEX_FORMAT.into(), version: INDEX_VERSION, runs: Vec::new() }
+        ResultsIndex { format: INDEX_FORMAT.into(), version: INDEX_VERSION, runs: Vec::new(), rankings: None }
+    }
+}
+
+impl ResultsIndex {
+    /// Ranks the runs at equal samples and at equal time.
+    pub fn rank(&mut self, lower_is_better: impl Fn(&str) -> bool + Copy) {
+        self.rankings = Some(IndexRankings {
+            equal_spp: crate::ranking::equal_spp(&self.runs, lower_is_better),
+            equal_time: crate::ranking::equal_time(&self.runs, lower_is_better),
+        });
     }
 }
 
@@ -170,20 +428,24 @@ impl ResultsDir {
     pub fn read_index(&self) -> io::Result<ResultsIndex> {
         let path = self.root.join(INDEX_FILE);
         match std::fs::read(&path) {
-            Ok(bytes) => serde_json::from_slice(&bytes)
-                .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, format!("{}: {e}", path.display()))),
+            Ok(bytes) => {
+                let mut index: ResultsIndex = serde_json::from_slice(&bytes)
+                    .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, format!("{}: {e}", path.display())))?;
+                index.runs.iter_mut().for_each(IndexEntry::upgrade);
+                Ok(index)
+            }
             Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(ResultsIndex::default()),
             Err(e) => Err(e),
         }
     }
 
-    /// Adds (or replaces) a run in the index.
+    /// Adds (or replaces) a repeat of a run in the index. A run's first
+    /// repeat starts it afresh: the run's other repeats, metric values and
+    /// files are dropped; a later repeat replaces the one of its number.
     pub fn record(&self, record: &RunRecord, log_path: &Path, image_path: Option<&Path>) -> io::Result<()> {
         let rel = |p: &Path| p.strip_prefix(&self.root).unwrap_or(p).to_string_lossy().into_owned();
-        let entry = IndexEntry {
-            technique: record.technique.clone(),
-            scene: record.scene.clone(),
-            spp: record.spp_budget,
+        let repeat = Repeat {
+            seed: record.seed,
             status: record.status,
             message: record.message.clone(),
             log: rel(log_path),
@@ -192,26 +454,62 @@ impl ResultsDir {
             render_ms: record.times.render_ms,
             wall_ms: record.times.wall_ms,
             cpu_ms: record.times.cpu_ms,
+            waiting_ms: record.times.waiting_ms,
             peak_memory_bytes: record.peak_memory_bytes,
             used_samples: record.used_samples,
-            metrics: Default::default(),
+            metrics: BTreeMap::new(),
         };
+        let key = (record.technique.as_str(), record.scene.as_str(), record.spp_budget);
         let mut index = self.read_index()?;
-        // A run replaced by a new one loses its old metric values and files.
-        if let Some(old) =
-            index.runs.iter().find(|r| (&r.technique, &r.scene, r.spp) == (&entry.technique, &entry.scene, entry.spp))
-        {
-            let dir = self.root.join(&old.technique).join(&old.scene);
-            let files = RunFiles { spp: old.spp };
-            let _ = std::fs::remove_file(dir.join(files.pixels()));
-            for metric in old.metrics.keys() {
-                let _ = std::fs::remove_file(dir.join(files.metric_value(metric)));
-                let _ = std::fs::remove_file(dir.join(files.error_map(metric)));
+        let position = index.runs.iter().position(|r| (r.technique.as_str(), r.scene.as_str(), r.spp) == key);
+        let mut entry = match position {
+            Some(i) if record.repeat > 0 => index.runs.remove(i),
+            Some(i) => {
+                let old = index.runs.remove(i);
+                self.remove_files(&old);
+                IndexEntry::new(&record.technique, &record.scene, record.spp_budget)
+            }
+            None => IndexEntry::new(&record.technique, &record.scene, record.spp_budget),
+        };
+        let k = record.repeat as usize;
+        if k < entry.repeats.len() {
+            self.remove_repeat_files(&entry, k);
+            entry.repeats[k] = repeat;
+        } else {
+            entry.repeats.push(repeat);
+        }
+        entry.summarize();
+        index.runs.push(entry);
+        index.rankings = None;
+        self.write_index(index)
+    }
+
+    /// Removes what `compute` derived from a run (and the files of its
+    /// repeats beyond the first, which the next benchmark may not make).
+    fn remove_files(&self, old: &IndexEntry) {
+        for k in 0..old.repeats.len().max(1) {
+            self.remove_repeat_files(old, k);
+            if k > 0 {
+                let dir = self.root.join(&old.technique).join(&old.scene);
+                let files = RunFiles { spp: old.spp, repeat: k as u32 };
+                for name in [files.image(), files.log(), files.technique_log()] {
+                    let _ = std::fs::remove_file(dir.join(name));
+                }
             }
         }
-        index.runs.retain(|r| (&r.technique, &r.scene, r.spp) != (&entry.technique, &entry.scene, entry.spp));
-        index.runs.push(entry);
-        self.write_index(index)
+    }
+
+    /// Removes the pixel file, metric values and error maps of repeat `k`.
+    fn remove_repeat_files(&self, entry: &IndexEntry, k: usize) {
+        let dir = self.root.join(&entry.technique).join(&entry.scene);
+        let files = RunFiles { spp: entry.spp, repeat: k as u32 };
+        let _ = std::fs::remove_file(dir.join(files.pixels()));
+        let metrics: BTreeSet<&String> =
+            entry.metrics.keys().chain(entry.repeats.iter().flat_map(|r| r.metrics.keys())).collect();
+        for metric in metrics {
+            let _ = std::fs::remove_file(dir.join(files.metric_value(metric)));
+            let _ = std::fs::remove_file(dir.join(files.error_map(metric)));
+        }
     }
 
     /// Writes the index (sorted by technique, scene and spp).

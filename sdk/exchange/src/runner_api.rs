@@ -292,7 +292,7 @@ pub struct SandboxLimits {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Upload {
-    /// One entry per (scene, spp).
+    /// One entry per (scene, spp), each with its repeats.
     pub runs: Vec<IndexEntry>,
     /// The metrics the values are in.
     pub metrics: Vec<MetricInfo>,
@@ -334,6 +334,25 @@ impl Upload {
             if let Some(image) = &run.image {
                 if !files.contains(image) {
                     return Err(format!("{at}: image {image:?} was not uploaded"));
+                }
+            }
+            let mut seeds = BTreeSet::new();
+            for (k, repeat) in run.repeats.iter().enumerate() {
+                let at = format!("{at}: repeats[{k}]");
+                if !seeds.insert(repeat.seed) {
+                    return Err(format!("{at}: seed {} appears twice", repeat.seed));
+                }
+                for (metric, value) in &repeat.metrics {
+                    if !metrics.contains(metric.as_str()) {
+                        return Err(format!("{at}: metric {metric:?} is not in \"metrics\""));
+                    }
+                    if !value.is_finite() {
+                        return Err(format!("{at}: {metric} is {value}; only finite values are stored"));
+                    }
+                }
+                let times = [repeat.technique_ms, repeat.render_ms, repeat.wall_ms, repeat.cpu_ms, repeat.waiting_ms];
+                if times.iter().any(|t| !t.is_finite() || *t < 0.0) {
+                    return Err(format!("{at}: times must be finite and not negative"));
                 }
             }
         }

@@ -8,7 +8,9 @@
 //! [`Delivery`]: a page from a server fetches them; a folder opened from
 //! `file://`, where browsers refuse `fetch`, loads them as scripts.
 
-use crate::results::MetricInfo;
+use crate::ranking::Cell;
+use crate::results::{IndexEntry, MetricInfo, Timing};
+use crate::stats::Interval;
 use crate::RunStatus;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -47,6 +49,30 @@ pub struct ViewerData {
     pub scenes: Vec<ViewerScene>,
     /// The techniques compared.
     pub techniques: Vec<ViewerTechnique>,
+    /// Every ranking cell, at equal samples and at equal time (techniques
+    /// by key): the viewer averages their places over the scenes shown, so
+    /// its ranking has the ties and the rule of [`crate::ranking`].
+    #[serde(default)]
+    pub rankings: Rankings,
+}
+
+/// The ranking cells of a document.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Rankings {
+    /// A cell per (scene, spp, metric).
+    pub equal_spp: Vec<Cell>,
+    /// A cell per (scene, time point, metric).
+    pub equal_time: Vec<Cell>,
+}
+
+impl Rankings {
+    /// The cells of `runs`, whose `technique` is the document's technique key.
+    pub fn of(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool + Copy) -> Rankings {
+        Rankings {
+            equal_spp: crate::ranking::equal_spp(runs, lower_is_better).cells,
+            equal_time: crate::ranking::equal_time(runs, lower_is_better).cells,
+        }
+    }
 }
 
 impl ViewerData {
@@ -61,6 +87,7 @@ impl ViewerData {
             metrics: Vec::new(),
             scenes: Vec::new(),
             techniques: Vec::new(),
+            rankings: Rankings::default(),
         }
     }
 }
@@ -122,6 +149,45 @@ pub struct ViewerRun {
     pub log: Option<String>,
     /// Error maps (PNG) by metric acronym.
     pub error_maps: BTreeMap<String, String>,
+    /// Time to the result in ms: technique time + waiting for the renderer.
+    #[serde(default)]
+    pub time_ms: f64,
+    /// Repeats (sample seeds) the values and times are over.
+    #[serde(default)]
+    pub seeds: usize,
+    /// Each metric's 95 % confidence interval over the repeats.
+    #[serde(default)]
+    pub intervals: BTreeMap<String, Interval>,
+    /// The times' spread over the repeats.
+    #[serde(default)]
+    pub timing: Option<Timing>,
+}
+
+impl ViewerRun {
+    /// A run's measurements from its index entry; the caller adds the
+    /// addresses of its files.
+    pub fn measured(entry: &IndexEntry) -> ViewerRun {
+        ViewerRun {
+            scene: entry.scene.clone(),
+            spp: entry.spp,
+            status: entry.status,
+            message: entry.message.clone(),
+            technique_ms: entry.technique_ms,
+            render_ms: entry.render_ms,
+            wall_ms: entry.wall_ms,
+            cpu_ms: entry.cpu_ms,
+            peak_memory_bytes: entry.peak_memory_bytes,
+            used_samples: entry.used_samples,
+            metrics: entry.metrics.clone(),
+            pixels: None,
+            log: None,
+            error_maps: BTreeMap::new(),
+            time_ms: entry.time(),
+            seeds: entry.repeats.len().max(1),
+            intervals: entry.intervals.clone(),
+            timing: entry.timing,
+        }
+    }
 }
 
 /// The viewer's code (`frontend/static/viewer/`), compiled in so that the

@@ -2,7 +2,9 @@
 //!
 //! The renderer of a scene starts once and serves every run on that scene
 //! (it is restarted only after a run left it broken or mid-request); the
-//! technique starts once per (scene, budget), as in the original FBKSD.
+//! technique starts once per (scene, budget, repeat), as in the original
+//! FBKSD. Repeat `k` of a run has the renderer's sample seed `k`, so every
+//! technique sees the same seeds and their values pair up in the ranking.
 
 use crate::process::Launcher;
 use crate::scene::{Limits, SceneRunner, TechniqueLaunch};
@@ -44,6 +46,8 @@ pub enum Progress<'a> {
         technique: &'a str,
         /// Budget.
         spp: u64,
+        /// Repeat (also the sample seed).
+        repeat: u32,
     },
     /// Samples flow (at most a few times per second).
     Samples {
@@ -69,6 +73,8 @@ pub struct Benchmark {
     pub limits: Limits,
     /// Starts renderers and techniques ([`crate::LocalLauncher`] for local runs).
     pub launcher: Arc<dyn Launcher>,
+    /// How many times each run is made, with sample seeds 0, 1, … (at least 1).
+    pub repeats: u32,
 }
 
 impl Benchmark {
@@ -85,60 +91,92 @@ impl Benchmark {
                 let technique_name = path_safe_name(&technique.name);
                 let dir = results.run_dir(&technique_name, &scene_name)?;
                 for &spp in &scene.spps {
-                    progress(Progress::RunStarted { scene: &scene_name, technique: &technique_name, spp });
-                    let files = RunFiles { spp };
-                    let technique_log = dir.join(files.technique_log());
-                    let _ = std::fs::remove_file(&technique_log);
-                    let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
-                    let outcome = runner.run_with_progress(
-                        spp,
-                        &TechniqueLaunch::Command(technique.argv.clone()),
-                        &technique_log,
-                        &mut |delivered, budget| progress(Progress::Samples { delivered, budget }),
-                    );
-                    let image_path = dir.join(files.image());
-                    let _ = std::fs::remove_file(&image_path);
-                    let mut status = outcome.status;
-                    let mut message = outcome.message;
-                    let image = match &outcome.image {
-                        Some(rgb) => match write_exr(&image_path, outcome.width, outcome.height, rgb) {
-                            Ok(()) => Some(image_path),
-                            Err(e) => {
-                                status = RunStatus::InvalidOutput;
-                                message = format!("cannot write the result image: {e}");
-                                None
-                            }
-                        },
-                        None => None,
-                    };
-                    let record = RunRecord {
-                        date,
-                        spp_budget: spp,
-                        samples_budget: outcome.samples_budget,
-                        used_samples: outcome.used_samples,
-                        aborted: status != RunStatus::Ok,
-                        exec_time: outcome.times.technique_ms,
-                        status,
-                        message,
-                        scene: scene_name.clone(),
-                        technique: technique_name.clone(),
-                        width: outcome.width,
-                        height: outcome.height,
-                        times: outcome.times,
-                        peak_memory_bytes: outcome.peak_memory_bytes,
-                        requests: outcome.requests,
-                        image: image.as_ref().map(|_| files.image()),
-                        technique_log: files.technique_log(),
-                    };
-                    let log_path = dir.join(files.log());
-                    write_json_atomically(&log_path, &record)?;
-                    results.record(&record, &log_path, image.as_deref())?;
-                    progress(Progress::RunFinished(&record));
-                    records.push(record);
+                    for repeat in 0..self.repeats.max(1) {
+                        runner.set_seed(repeat as u64);
+                        let record = self.run_once(
+                            &mut runner,
+                            &results,
+                            &dir,
+                            technique,
+                            &scene_name,
+                            spp,
+                            repeat,
+                            &mut progress,
+                        )?;
+                        progress(Progress::RunFinished(&record));
+                        records.push(record);
+                    }
                 }
             }
             let _ = runner.finish();
         }
         Ok(records)
+    }
+
+    /// One repeat of one run, its files written and indexed.
+    #[allow(clippy::too_many_arguments)]
+    fn run_once(
+        &self,
+        runner: &mut SceneRunner,
+        results: &ResultsDir,
+        dir: &std::path::Path,
+        technique: &TechniqueSpec,
+        scene_name: &str,
+        spp: u64,
+        repeat: u32,
+        progress: &mut (impl FnMut(Progress<'_>) + Send),
+    ) -> io::Result<RunRecord> {
+        let technique_name = path_safe_name(&technique.name);
+        progress(Progress::RunStarted { scene: scene_name, technique: &technique_name, spp, repeat });
+        let files = RunFiles { spp, repeat };
+        let technique_log = dir.join(files.technique_log());
+        let _ = std::fs::remove_file(&technique_log);
+        let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+        let outcome = runner.run_with_progress(
+            spp,
+            &TechniqueLaunch::Command(technique.argv.clone()),
+            &technique_log,
+            &mut |delivered, budget| progress(Progress::Samples { delivered, budget }),
+        );
+        let image_path = dir.join(files.image());
+        let _ = std::fs::remove_file(&image_path);
+        let mut status = outcome.status;
+        let mut message = outcome.message;
+        let image = match &outcome.image {
+            Some(rgb) => match write_exr(&image_path, outcome.width, outcome.height, rgb) {
+                Ok(()) => Some(image_path),
+                Err(e) => {
+                    status = RunStatus::InvalidOutput;
+                    message = format!("cannot write the result image: {e}");
+                    None
+                }
+            },
+            None => None,
+        };
+        let record = RunRecord {
+            date,
+            spp_budget: spp,
+            samples_budget: outcome.samples_budget,
+            used_samples: outcome.used_samples,
+            aborted: status != RunStatus::Ok,
+            exec_time: outcome.times.technique_ms,
+            status,
+            message,
+            scene: scene_name.to_string(),
+            technique: technique_name,
+            width: outcome.width,
+            height: outcome.height,
+            times: outcome.times,
+            peak_memory_bytes: outcome.peak_memory_bytes,
+            requests: outcome.requests,
+            image: image.as_ref().map(|_| files.image()),
+            technique_log: files.technique_log(),
+            seed: repeat as u64,
+            repeat,
+        };
+        let log_path = dir.join(files.log());
+        write_json_atomically(&log_path, &record)?;
+        results.record(&record, &log_path, image.as_deref())?;
+        Ok(record)
     }
 }

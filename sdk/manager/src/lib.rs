@@ -29,6 +29,7 @@
 //!     results: "results".into(),
 //!     limits: Limits::default(),
 //!     launcher: std::sync::Arc::new(fbksd_manager::LocalLauncher),
+//!     repeats: 1,
 //! };
 //! let records = bench.run(|_| {}).unwrap();
 //! ```

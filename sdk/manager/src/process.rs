@@ -79,7 +79,17 @@ pub trait Running: Send {
     /// When its program started: the technique's clock starts here, so a
     /// container's creation is not counted as the technique's time.
     fn started_at(&self) -> Instant;
+
+    /// A clock of the CPU time it has used so far (all its threads), read
+    /// while it runs; `None` where it cannot be read. The manager charges
+    /// the technique the CPU it burns while it waits for the renderer.
+    fn cpu_clock(&self) -> Option<CpuClock> {
+        None
+    }
 }
+
+/// Reads a running process's CPU time so far (`None` once it is gone).
+pub type CpuClock = Box<dyn Fn() -> Option<std::time::Duration> + Send>;
 
 /// Starts a run's processes.
 pub trait Launcher: std::fmt::Debug + Send + Sync {
@@ -114,6 +124,20 @@ impl Running for Supervised {
 
     fn started_at(&self) -> Instant {
         self.started
+    }
+
+    fn cpu_clock(&self) -> Option<CpuClock> {
+        let mut clock: libc::clockid_t = 0;
+        // SAFETY: clock_getcpuclockid writes one clockid_t.
+        if unsafe { libc::clock_getcpuclockid(self.pid, &mut clock) } != 0 {
+            return None;
+        }
+        Some(Box::new(move || {
+            let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+            // SAFETY: clock_gettime writes one timespec; a dead process's clock fails cleanly.
+            (unsafe { libc::clock_gettime(clock, &mut ts) } == 0)
+                .then(|| std::time::Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32))
+        }))
     }
 }
 

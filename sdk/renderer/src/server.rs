@@ -174,7 +174,7 @@ impl RenderingServer {
                         Err(e) => link.send(&FromRenderer::Failed { message: format!("layout rejected: {e}") })?,
                     }
                 }
-                ToRenderer::Evaluate { spp, remaining, pipe_size, input, request } => {
+                ToRenderer::Evaluate { spp, remaining, pipe_size, input, request, seed } => {
                     join(&mut worker);
                     let Some((layout, ring)) = session.clone() else {
                         return Err(RendererError::Protocol("evaluate before set_layout".into()));
@@ -184,7 +184,7 @@ impl RenderingServer {
                         remaining,
                         pipe_size,
                         input,
-                        request,
+                        request: sample_stream(seed, request),
                         width,
                         height,
                         tile_size,
@@ -269,6 +269,13 @@ impl ParamTable {
     }
 }
 
+/// The stream a renderer seeds a request's samples from: distinct for
+/// every (seed, request) below 2³² each, and the request index itself for
+/// seed 0.
+pub fn sample_stream(seed: u64, request: u64) -> u64 {
+    request.wrapping_add(seed << 32)
+}
+
 /// One request, as seen by the evaluate callback.
 pub struct Evaluation {
     /// Samples per pixel to produce (may be 0).
@@ -279,7 +286,10 @@ pub struct Evaluation {
     pub pipe_size: u64,
     /// Whether the technique writes INPUT random parameters.
     pub input: bool,
-    /// Index of this request within the technique session (for seeding).
+    /// The sample stream of this request, for seeding: the request's index
+    /// within the technique session, offset by the run's seed
+    /// ([`sample_stream`]), so every repeat of a run draws other samples
+    /// while seed 0 keeps the streams of a single run.
     pub request: u64,
     width: u32,
     height: u32,

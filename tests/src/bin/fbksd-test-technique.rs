@@ -53,8 +53,74 @@ fn main() -> anyhow::Result<()> {
         "duplicate-layout" => raw_session(FromTechnique::SetLayout {
             layout: SampleLayout::new().with("COLOR_R").with("COLOR_G").with("COLOR_R"),
         }),
+        "denormals-and-negatives" => {
+            // A legitimate image of odd floats: denormals, negatives, huge and zero values.
+            let mut client = BenchmarkClient::connect()?;
+            client.set_sample_layout(&SampleLayout::new().with("COLOR_R"))?;
+            client.evaluate_samples(Spp(1), |_| {})?;
+            let odd = [1e-40f32, -1.0, 3e38, 0.0, -0.0, f32::MIN_POSITIVE / 4.0];
+            for (i, v) in client.result_buffer().iter_mut().enumerate() {
+                *v = odd[i % odd.len()];
+            }
+            client.send_result()?;
+            Ok(())
+        }
+        "idle-while-waiting" => waits_for_samples(None),
+        "burn-while-waiting" => waits_for_samples(Some(Work::Burn)),
+        "sleep-before-request" => waits_for_samples(Some(Work::SleepFirst)),
         other => bail!("unknown mode {other:?}"),
     }
+}
+
+/// What a technique does besides asking for samples.
+enum Work {
+    /// Burns a second of CPU in another thread, starting as it asks for samples.
+    Burn,
+    /// Sleeps a second before its request.
+    SleepFirst,
+}
+
+/// CPU time of the calling thread (user + system, from /proc, in 10 ms ticks).
+fn thread_cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
+    // Fields after the command's closing parenthesis: utime and stime are the 12th and 13th.
+    let fields: Vec<&str> = stat.rsplit_once(')').map_or("", |(_, rest)| rest).split_whitespace().collect();
+    let ticks: f64 = fields.get(11..13).map_or(0.0, |f| f.iter().filter_map(|v| v.parse::<f64>().ok()).sum());
+    ticks / 100.0
+}
+
+/// Asks for 1 spp (from a slow renderer) and sends the samples' mean, doing
+/// `work` too; the manager must charge the work, not the waiting.
+fn waits_for_samples(work: Option<Work>) -> anyhow::Result<()> {
+    let mut client = BenchmarkClient::connect()?;
+    client.set_sample_layout(&SampleLayout::new().with("COLOR_R"))?;
+    let burner = match work {
+        // A second of this thread's CPU (not of wall time: on a busy machine
+        // the burn takes longer, and the charge must still be a second).
+        Some(Work::Burn) => Some(std::thread::spawn(|| {
+            let mut x = 1u64;
+            while thread_cpu_seconds() < 1.0 {
+                for _ in 0..100_000 {
+                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+                }
+            }
+            x
+        })),
+        Some(Work::SleepFirst) => {
+            std::thread::sleep(std::time::Duration::from_secs(1));
+            None
+        }
+        None => None,
+    };
+    let mut sum = 0.0;
+    client.evaluate_samples(Spp(1), |tile| sum += tile.data().iter().map(|v| *v as f64).sum::<f64>())?;
+    if let Some(b) = burner {
+        b.join().expect("the burner ends");
+    }
+    let value = sum as f32;
+    client.result_buffer().iter_mut().for_each(|v| *v = value);
+    client.send_result()?;
+    Ok(())
 }
 
 /// Speaks the protocol directly, to send what the client library never would.

@@ -16,7 +16,7 @@ use fbksd_core::protocol::{write_frame, FromRenderer, Hello, Role, ToRenderer, P
 use fbksd_core::scene_info::keys;
 use fbksd_core::{rendezvous, SceneInfo};
 use fbksd_exchange::record::{RunStatus, Times};
-use session::Session;
+use session::{Session, WaitClock};
 use std::collections::VecDeque;
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -115,10 +115,13 @@ impl RunOutcome {
     fn measured(mut self, s: &mut Session, started: Instant, status: RunStatus, message: String) -> RunOutcome {
         let end = s.result_at.unwrap_or_else(Instant::now);
         let wall = end - started;
-        let waiting = s.waiting + s.waiting_since.map_or(Duration::ZERO, |w| end.saturating_duration_since(w));
+        s.clock.stop_at(end);
+        let waiting = s.clock.waiting;
+        let background = s.clock.cpu_while_waiting;
         self.times = Times {
-            technique_ms: ms(wall.saturating_sub(waiting)),
+            technique_ms: ms(wall.saturating_sub(waiting) + background),
             waiting_ms: ms(waiting),
+            background_cpu_ms: ms(background),
             render_ms: ms(s.render_time),
             wall_ms: ms(wall),
             startup_ms: s.hello_at.map_or(0.0, |h| ms(h - started)),
@@ -148,6 +151,7 @@ pub struct SceneRunner {
     generation: u64,
     sessions: u64,
     early_techniques: Vec<(UnixStream, Hello)>,
+    seed: u64,
 }
 
 impl SceneRunner {
@@ -177,6 +181,7 @@ impl SceneRunner {
             generation: 0,
             sessions: 0,
             early_techniques: Vec::new(),
+            seed: 0,
         })
     }
 
@@ -193,6 +198,12 @@ impl SceneRunner {
         }
         self.launcher = launcher;
         Ok(self)
+    }
+
+    /// Sets the renderer's sample seed of the following runs (0 until set):
+    /// repeats of a run differ only in their seed.
+    pub fn set_seed(&mut self, seed: u64) {
+        self.seed = seed;
     }
 
     /// The rendezvous directory (what `FBKSD_RENDEZVOUS` names).
@@ -407,8 +418,8 @@ impl SceneRunner {
             free: VecDeque::new(),
             queued: VecDeque::new(),
             held: 0,
-            waiting_since: None,
-            waiting: Duration::ZERO,
+            clock: WaitClock::new(technique.as_ref().and_then(|t| t.cpu_clock())),
+            seed: self.seed,
             render_started: None,
             render_time: Duration::ZERO,
             result_at: None,

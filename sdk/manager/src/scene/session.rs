@@ -4,7 +4,7 @@
 //! event loop in the parent module feeds it) and says when the run ends.
 
 use super::conn::{refuse, spawn_reader, Event, RendererConn};
-use crate::process::ExitInfo;
+use crate::process::{CpuClock, ExitInfo};
 use fbksd_core::layout::CompiledLayout;
 use fbksd_core::protocol::{
     write_frame, Amount, ErrorKind, FromRenderer, FromTechnique, Hello, Role, ToRenderer, ToTechnique, PROTOCOL_VERSION,
@@ -47,6 +47,50 @@ impl Active {
 
 pub(super) type End = Option<(RunStatus, String)>;
 
+/// The technique's waiting clock: the wall time it waits for the renderer
+/// (inside a request with no tile in its hands, or while the renderer takes
+/// its layout), which is not its time, and the CPU time it burns meanwhile
+/// (in other threads: work moved out of the tile callbacks), which is.
+pub(super) struct WaitClock {
+    cpu: Option<CpuClock>,
+    since: Option<(Instant, Option<Duration>)>,
+    /// Wall time spent waiting (closed intervals).
+    pub(super) waiting: Duration,
+    /// CPU time the technique used while waiting (closed intervals).
+    pub(super) cpu_while_waiting: Duration,
+}
+
+impl WaitClock {
+    pub(super) fn new(cpu: Option<CpuClock>) -> WaitClock {
+        WaitClock { cpu, since: None, waiting: Duration::ZERO, cpu_while_waiting: Duration::ZERO }
+    }
+
+    fn cpu_now(&self) -> Option<Duration> {
+        self.cpu.as_ref().and_then(|c| c())
+    }
+
+    /// Starts waiting (no change when already waiting).
+    pub(super) fn start(&mut self) {
+        if self.since.is_none() {
+            self.since = Some((Instant::now(), self.cpu_now()));
+        }
+    }
+
+    /// Stops waiting at `at` (no change when not waiting).
+    pub(super) fn stop_at(&mut self, at: Instant) {
+        if let Some((since, cpu_then)) = self.since.take() {
+            self.waiting += at.saturating_duration_since(since);
+            if let (Some(then), Some(now)) = (cpu_then, self.cpu_now()) {
+                self.cpu_while_waiting += now.saturating_sub(then);
+            }
+        }
+    }
+
+    pub(super) fn stop(&mut self) {
+        self.stop_at(Instant::now());
+    }
+}
+
 /// The state of one technique session.
 pub(super) struct Session {
     /// The token a spawned technique must present (none in debug mode).
@@ -79,8 +123,9 @@ pub(super) struct Session {
     pub(super) queued: VecDeque<(u64, Tile)>,
     /// Slots in the technique's hands (producing or consuming).
     pub(super) held: usize,
-    pub(super) waiting_since: Option<Instant>,
-    pub(super) waiting: Duration,
+    pub(super) clock: WaitClock,
+    /// The renderer's sample seed for this run.
+    pub(super) seed: u64,
     pub(super) render_started: Option<Instant>,
     pub(super) render_time: Duration,
     pub(super) result_at: Option<Instant>,
@@ -169,9 +214,7 @@ impl Session {
 
     fn hand_to_technique(&mut self, message: ToTechnique) {
         if self.held == 0 {
-            if let Some(since) = self.waiting_since.take() {
-                self.waiting += since.elapsed();
-            }
+            self.clock.stop();
         }
         self.held += 1;
         self.send(&message);
@@ -180,7 +223,7 @@ impl Session {
     fn take_back_from_technique(&mut self) {
         self.held -= 1;
         if self.held == 0 && self.active.is_some() {
-            self.waiting_since = Some(Instant::now());
+            self.clock.start();
         }
     }
 
@@ -233,7 +276,7 @@ impl Session {
                 self.ring = Some(spec);
                 self.layout_pending = Some((compiled, spec));
                 // The technique now waits for the renderer: not its time.
-                self.waiting_since = Some(Instant::now());
+                self.clock.start();
                 None
             }
             FromTechnique::Evaluate { amount, input } => self.start_request(amount, input, renderer),
@@ -368,7 +411,7 @@ impl Session {
             renderer_done: false,
         });
         debug_assert_eq!(spp * pixels + free, samples);
-        self.waiting_since = Some(Instant::now());
+        self.clock.start();
         self.render_started = Some(Instant::now());
         renderer.send(&ToRenderer::Evaluate {
             spp,
@@ -376,6 +419,7 @@ impl Session {
             pipe_size: self.pipe_size,
             input,
             request: self.requests - 1,
+            seed: self.seed,
         });
         None
     }
@@ -399,9 +443,7 @@ impl Session {
                 };
                 self.send(&ToTechnique::LayoutSet { ring, sample_size: compiled.sample_size() as u32 });
                 self.layout = Some(compiled);
-                if let Some(since) = self.waiting_since.take() {
-                    self.waiting += since.elapsed();
-                }
+                self.clock.stop();
                 None
             }
             FromRenderer::Failed { message } if self.layout_pending.is_some() => {
@@ -508,9 +550,7 @@ impl Session {
         let delivered = a.delivered;
         self.used += delivered;
         self.active = None;
-        if let Some(since) = self.waiting_since.take() {
-            self.waiting += since.elapsed();
-        }
+        self.clock.stop();
         let remaining = self.budget - self.used;
         self.send(&ToTechnique::EvaluateDone { delivered, remaining });
         None

@@ -14,7 +14,10 @@ struct EntryView {
     status: String,
     message: String,
     values: Vec<String>,
+    /// "= beta, gamma" when it ties by the sort metric, else empty.
+    tied: String,
     time: String,
+    time_to_result: String,
     image: String,
 }
 
@@ -32,6 +35,8 @@ struct StandingView {
     result_id: String,
     highlighted: bool,
     mean_rank: String,
+    mean_rank_time: String,
+    tied: usize,
     missing: usize,
 }
 
@@ -117,8 +122,21 @@ async fn board_page(
                     highlighted: e.highlighted,
                     status: e.status.clone(),
                     message: e.message.clone(),
-                    values: e.values.iter().copied().map(number).collect(),
-                    time: format!("{:.1} ms", e.technique_ms),
+                    values: e
+                        .values
+                        .iter()
+                        .zip(&e.intervals)
+                        .map(|(v, i)| match i {
+                            Some(i) => format!("{} ± {}", number(*v), number(Some(i.half_width()))),
+                            None => number(*v),
+                        })
+                        .collect(),
+                    tied: if e.tied_with.is_empty() { String::new() } else { e.tied_with.join(", ") },
+                    time: match e.time_cv {
+                        Some(cv) => format!("{:.1} ms (CV {:.1} %)", e.technique_ms, cv * 100.0),
+                        None => format!("{:.1} ms", e.technique_ms),
+                    },
+                    time_to_result: format!("{:.1} ms", e.time_ms),
                 })
                 .collect(),
             scene: g.scene.clone(),
@@ -136,6 +154,12 @@ async fn board_page(
             result_id: s.result_id.clone(),
             highlighted: s.highlighted,
             mean_rank: format!("{:.2}", s.mean_rank),
+            mean_rank_time: if s.mean_rank_time.is_finite() {
+                format!("{:.2}", s.mean_rank_time)
+            } else {
+                "—".into()
+            },
+            tied: s.tied,
             missing: s.missing,
         })
         .collect();
