@@ -140,19 +140,23 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
         by_scene.entry(&r.scene).or_default().push(r);
     }
     let mut cells = Vec::new();
-    for (scene, entries) in by_scene {
+    for (scene, mut entries) in by_scene {
+        entries.sort_by_key(|r| r.spp);
+        let points = time_points(&entries);
         let metrics: BTreeSet<&str> = entries.iter().flat_map(|r| r.metrics.keys().map(String::as_str)).collect();
-        for (ms, fastest, spp) in time_points(&entries) {
-            for &metric in &metrics {
-                let mut values = Vec::new();
-                for technique in &techniques {
-                    let mut curve: Vec<&&IndexEntry> = entries.iter().filter(|r| r.technique == *technique).collect();
-                    curve.sort_by_key(|r| r.spp);
-                    let points: Vec<(f64, Samples)> = curve.iter().map(|r| (r.time(), r.samples(metric))).collect();
-                    if let Some(samples) = interpolate(&points, ms) {
-                        values.push((*technique, samples));
-                    }
-                }
+        // Each technique's curve per metric, in budget order, made once for every time point.
+        let curves: BTreeMap<&str, Vec<(&str, Curve)>> = metrics
+            .iter()
+            .map(|&metric| {
+                let curve = |t: &str| -> Curve {
+                    entries.iter().filter(|r| r.technique == t).map(|r| (r.time(), r.samples(metric))).collect()
+                };
+                (metric, techniques.iter().map(|t| (*t, curve(t))).collect())
+            })
+            .collect();
+        for &(ms, fastest, spp) in &points {
+            for (&metric, curves) in &curves {
+                let values = curves.iter().filter_map(|(t, curve)| Some((*t, interpolate(curve, ms)?))).collect();
                 let at = At::Time { ms, fastest: fastest.to_string(), spp };
                 cells.push(place(scene, metric, at, values, &techniques, lower_is_better(metric)));
             }
@@ -160,6 +164,9 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
     }
     standings(&techniques, cells)
 }
+
+/// A technique's error-against-time curve: (time to result, values by seed), in budget order.
+type Curve = Vec<(f64, Samples)>;
 
 /// A scene's time points: at each budget, the fastest technique's time.
 fn time_points<'a>(entries: &[&'a IndexEntry]) -> Vec<(f64, &'a str, u64)> {
