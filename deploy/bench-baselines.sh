@@ -19,16 +19,9 @@ scenes=("$@")
 if [ ${#scenes[@]} -eq 0 ]; then
     scenes=(scenes/experimental/* scenes/production-small/cornell-box)
 fi
-root=$PWD
-work=$root/target/bench-baselines
-rm -rf "$work/results" && mkdir -p "$work/python/fbksd"
-
-cargo build --release --locked --workspace --bins --lib >&2
-bash deploy/install-sdk.sh "$work/sdk" target/release >&2
-# The Python package as pip would install it: sources and the release native module.
-cp sdk/python/python/fbksd/*.py "$work/python/fbksd/"
-cp target/release/lib_native.so "$work/python/fbksd/_native.so"
-export PYTHONPATH=$work/python
+work=$PWD/target/bench-baselines
+source deploy/bench-env.sh
+bench_env "$work"
 
 for scene in "${scenes[@]}"; do
     case "$scene" in
@@ -42,9 +35,7 @@ techniques=()
 while read -r name; do
     repo=sdk/techniques/$name
     if [ -f "$repo/CMakeLists.txt" ]; then
-        cmake -S "$repo" -B "$work/build/$name" -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH="$work/sdk" >&2
-        cmake --build "$work/build/$name" -j2 >&2
-        dir=$work/build/$name
+        dir=$(build_technique "$name")
     else
         dir=$repo
     fi
