@@ -2,6 +2,12 @@
 //! boundary, argon2 password hashes, one-time e-mail tokens, and browser
 //! sessions with their CSRF token. Only SHA-256 digests of tokens are
 //! stored, so a leaked database opens no session.
+//!
+//! Argon2 is slow on purpose; it runs on blocking threads, at most one per
+//! core, so a flood of log-ins queues for the CPU instead of stalling the
+//! async workers that answer heartbeats and pages. A log-in for an unknown
+//! address verifies against a dummy hash, so its answer and its time are
+//! those of a wrong password.
 
 use crate::error::ServiceError;
 use crate::now_ms;
@@ -10,6 +16,8 @@ use argon2::Argon2;
 use rand::RngCore;
 use sha2::{Digest, Sha256};
 use sqlx::{AnyPool, Row};
+use std::sync::{Arc, LazyLock};
+use tokio::sync::Semaphore;
 
 /// A valid, normalised (trimmed, lower-case) e-mail address.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -60,15 +68,56 @@ impl Password {
         Ok(Password(text.to_string()))
     }
 
-    fn hash(&self) -> Result<String, ServiceError> {
-        let salt = SaltString::generate(&mut OsRng);
-        Argon2::default().hash_password(self.0.as_bytes(), &salt).map(|h| h.to_string()).map_err(ServiceError::internal)
+    async fn hash(&self) -> Result<String, ServiceError> {
+        let password = self.0.clone();
+        off_workers(move || hash_password(&password)).await?
     }
+}
+
+fn hash_password(password: &str) -> Result<String, ServiceError> {
+    let salt = SaltString::generate(&mut OsRng);
+    Argon2::default().hash_password(password.as_bytes(), &salt).map(|h| h.to_string()).map_err(ServiceError::internal)
 }
 
 /// Whether `password` matches the stored argon2 `hash`.
 fn password_matches(password: &str, hash: &str) -> bool {
     PasswordHash::new(hash).is_ok_and(|h| Argon2::default().verify_password(password.as_bytes(), &h).is_ok())
+}
+
+/// Hashes running at once: one per core.
+static HASHING: LazyLock<Arc<Semaphore>> =
+    LazyLock::new(|| Arc::new(Semaphore::new(std::thread::available_parallelism().map_or(2, |n| n.get()))));
+
+/// The hash an unknown address's log-in is checked against: the same
+/// parameters, so the same work, as a real one; matched by no password.
+static DUMMY_HASH: LazyLock<String> =
+    LazyLock::new(|| hash_password(&random_token()).expect("argon2 hashes a random password"));
+
+/// Runs argon2 `work` on a blocking thread once a core is free. The permit
+/// goes with the work, so a client that hangs up does not free its core
+/// while the hash still runs.
+async fn off_workers<T: Send + 'static>(work: impl FnOnce() -> T + Send + 'static) -> Result<T, ServiceError> {
+    let permit = HASHING.clone().acquire_owned().await.map_err(ServiceError::internal)?;
+    tokio::task::spawn_blocking(move || {
+        let _permit = permit;
+        work()
+    })
+    .await
+    .map_err(ServiceError::internal)
+}
+
+/// Whether `password` matches `hash`, off the async workers; no hash (an
+/// unknown address) costs the same and never matches.
+async fn verify_password(password: &str, hash: Option<String>) -> Result<bool, ServiceError> {
+    let password = password.to_string();
+    off_workers(move || match hash {
+        Some(hash) => password_matches(&password, &hash),
+        None => {
+            password_matches(&password, &DUMMY_HASH);
+            false
+        }
+    })
+    .await
 }
 
 /// A random token (256 bits, hex).
@@ -112,14 +161,31 @@ fn user_of(row: &sqlx::any::AnyRow) -> Result<User, sqlx::Error> {
 /// Registers an unverified account and mails its verification link.
 pub async fn register(state: &crate::AppState, email: &Email, password: &Password) -> Result<User, ServiceError> {
     let user = create_user(&state.pool, email, password, false, false).await?;
-    let token = issue_email_token(&state.pool, &user.id, "verify").await?;
+    mail_verification(state, &user.id, email).await?;
+    Ok(user)
+}
+
+async fn mail_verification(state: &crate::AppState, user_id: &str, email: &Email) -> Result<(), ServiceError> {
+    let token = issue_email_token(&state.pool, user_id, "verify").await?;
     let link = format!("{}/accounts/verify?token={token}", state.public_url);
     let body = format!(
         "Welcome to FBKSD.\n\nConfirm your e-mail address to use your account:\n\n{link}\n\n\
          The link works once, for 48 hours. If you did not register, ignore this message.\n"
     );
     state.mailer.send(&state.config.mail_from, email.as_str(), "Confirm your FBKSD account", body).await?;
-    Ok(user)
+    Ok(())
+}
+
+/// Mails a new verification link if `email` has an account that is not
+/// verified yet; does nothing otherwise (callers answer the same either
+/// way). Earlier links keep working until they expire.
+pub async fn resend_verification(state: &crate::AppState, email: &Email) -> Result<(), ServiceError> {
+    let row = sqlx::query("SELECT id FROM users WHERE email = $1 AND verified = 0")
+        .bind(email.as_str())
+        .fetch_optional(&state.pool)
+        .await?;
+    let Some(row) = row else { return Ok(()) };
+    mail_verification(state, &row.try_get::<String, _>("id")?, email).await
 }
 
 /// Mails a password-reset token if `email` has an account; does nothing
@@ -148,7 +214,7 @@ pub async fn create_user(
     is_admin: bool,
 ) -> Result<User, ServiceError> {
     let id = uuid::Uuid::new_v4().to_string();
-    let hash = password.hash()?;
+    let hash = password.hash().await?;
     let inserted = sqlx::query(
         "INSERT INTO users (id, email, password_hash, verified, is_admin, created_at) VALUES ($1, $2, $3, $4, $5, $6)",
     )
@@ -228,22 +294,49 @@ pub async fn issue_email_token(pool: &AnyPool, user_id: &str, purpose: &str) -> 
 /// Uses a one-time token: returns its user, or an error saying it is
 /// unknown, used or expired.
 pub async fn redeem_email_token(pool: &AnyPool, token: &str, purpose: &str) -> Result<String, ServiceError> {
+    let mut conn = pool.acquire().await?;
+    redeem(&mut conn, token, purpose).await
+}
+
+/// Marks a live token used and returns its user, in one statement, so two
+/// requests racing with one token cannot both redeem it.
+async fn redeem(conn: &mut sqlx::AnyConnection, token: &str, purpose: &str) -> Result<String, ServiceError> {
     let invalid =
         || ServiceError::invalid("invalid_token", "this link is unknown, already used or expired: ask for a new one");
+    let row = sqlx::query(
+        "UPDATE email_tokens SET used = 1 \
+         WHERE token_hash = $1 AND purpose = $2 AND used = 0 AND expires_at >= $3 RETURNING user_id",
+    )
+    .bind(digest(token))
+    .bind(purpose)
+    .bind(now_ms())
+    .fetch_optional(&mut *conn)
+    .await?
+    .ok_or_else(invalid)?;
+    Ok(row.try_get("user_id")?)
+}
+
+/// Sets a new password with a mailed reset token. Whoever had the account
+/// is shut out: every session and access token ends, and every other
+/// reset token dies. The address is verified: the mail was read.
+pub async fn reset_password(pool: &AnyPool, token: &str, password: &Password) -> Result<(), ServiceError> {
+    // Hashed before the transaction, which must not wait for a core.
+    let hash = password.hash().await?;
     let mut tx = pool.begin().await?;
-    let row = sqlx::query("SELECT user_id, expires_at, used FROM email_tokens WHERE token_hash = $1 AND purpose = $2")
-        .bind(digest(token))
-        .bind(purpose)
-        .fetch_optional(&mut *tx)
-        .await?
-        .ok_or_else(invalid)?;
-    if row.try_get::<i64, _>("used")? != 0 || row.try_get::<i64, _>("expires_at")? < now_ms() {
-        return Err(invalid());
-    }
-    let user_id: String = row.try_get("user_id")?;
-    sqlx::query("UPDATE email_tokens SET used = 1 WHERE token_hash = $1").bind(digest(token)).execute(&mut *tx).await?;
+    let user_id = redeem(&mut tx, token, "reset").await?;
+    sqlx::query("UPDATE users SET password_hash = $1, verified = 1 WHERE id = $2")
+        .bind(&hash)
+        .bind(&user_id)
+        .execute(&mut *tx)
+        .await?;
+    sqlx::query("DELETE FROM sessions WHERE user_id = $1").bind(&user_id).execute(&mut *tx).await?;
+    sqlx::query("DELETE FROM access_tokens WHERE user_id = $1").bind(&user_id).execute(&mut *tx).await?;
+    sqlx::query("UPDATE email_tokens SET used = 1 WHERE user_id = $1 AND purpose = 'reset' AND used = 0")
+        .bind(&user_id)
+        .execute(&mut *tx)
+        .await?;
     tx.commit().await?;
-    Ok(user_id)
+    Ok(())
 }
 
 /// Marks a user's address verified.
@@ -256,16 +349,18 @@ pub async fn mark_verified(pool: &AnyPool, user_id: &str) -> Result<(), sqlx::Er
 /// a wrong password, so it does not tell which addresses exist.
 pub async fn authenticate(pool: &AnyPool, email: &str, password: &str) -> Result<User, ServiceError> {
     let wrong = || ServiceError::unauthenticated("wrong e-mail address or password");
+    // No account has a malformed address or an over-long password: nothing to time.
     let email = Email::parse(email).map_err(|_| wrong())?;
+    if password.chars().count() > 1024 {
+        return Err(wrong());
+    }
     let row = sqlx::query("SELECT id, email, password_hash, verified, is_admin FROM users WHERE email = $1")
         .bind(email.as_str())
         .fetch_optional(pool)
-        .await?
-        .ok_or_else(wrong)?;
-    let hash: String = row.try_get("password_hash")?;
-    if !password_matches(password, &hash) {
-        return Err(wrong());
-    }
+        .await?;
+    let hash = row.as_ref().map(|r| r.try_get::<String, _>("password_hash")).transpose()?;
+    let matches = verify_password(password, hash).await?;
+    let Some(row) = row.filter(|_| matches) else { return Err(wrong()) };
     let user = user_of(&row)?;
     if !user.verified {
         return Err(ServiceError::forbidden(
@@ -322,7 +417,7 @@ pub async fn close_session(pool: &AnyPool, token: &str) -> Result<(), sqlx::Erro
 
 /// Sets a new password and ends every session of the user.
 pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) -> Result<(), ServiceError> {
-    let hash = password.hash()?;
+    let hash = password.hash().await?;
     let mut tx = pool.begin().await?;
     sqlx::query("UPDATE users SET password_hash = $1 WHERE id = $2")
         .bind(&hash)
@@ -337,7 +432,7 @@ pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) ->
 /// Checks a user's current password (for changes that need it).
 pub async fn check_password(pool: &AnyPool, user_id: &str, password: &str) -> Result<(), ServiceError> {
     let row = sqlx::query("SELECT password_hash FROM users WHERE id = $1").bind(user_id).fetch_one(pool).await?;
-    if password_matches(password, &row.try_get::<String, _>("password_hash")?) {
+    if verify_password(password, Some(row.try_get("password_hash")?)).await? {
         Ok(())
     } else {
         Err(ServiceError::forbidden("wrong_password", "the current password is wrong"))
@@ -467,14 +562,16 @@ mod tests {
         assert!(Email::parse(&format!("{}@example.org", "a".repeat(250))).is_err());
     }
 
-    #[test]
-    fn passwords_need_ten_characters_and_hash_with_argon2() {
+    #[tokio::test]
+    async fn passwords_need_ten_characters_and_hash_with_argon2() {
         assert_eq!(Password::parse("short").err().unwrap().code, "weak_password");
         let p = Password::parse("correct horse battery").unwrap();
-        let hash = p.hash().unwrap();
+        let hash = p.hash().await.unwrap();
         assert!(hash.starts_with("$argon2"));
-        assert!(password_matches("correct horse battery", &hash));
-        assert!(!password_matches("correct horse battery!", &hash));
+        assert!(verify_password("correct horse battery", Some(hash.clone())).await.unwrap());
+        assert!(!verify_password("correct horse battery!", Some(hash)).await.unwrap());
+        assert!(!verify_password("correct horse battery", None).await.unwrap(), "the dummy hash matches nothing");
+        assert!(DUMMY_HASH.starts_with("$argon2"));
     }
 
     #[test]

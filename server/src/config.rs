@@ -9,6 +9,7 @@ use figment::Figment;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// A secret that never prints (database URLs with passwords, SMTP credentials).
 #[derive(Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -64,6 +65,79 @@ pub struct Config {
     /// Benchmark runs a user may request per 24 hours; infrastructure
     /// failures and runs cancelled before they started do not count.
     pub max_runs_per_day: u64,
+    /// Failed log-ins per e-mail address (API and form; a success gives
+    /// its attempt back), e.g. `"10 per 15m"`: guessing one password.
+    pub login_limit_per_address: RateLimit,
+    /// Log-in attempts per client address: one machine trying many accounts.
+    pub login_limit_per_ip: RateLimit,
+    /// Account mails (registration, verification link again, password
+    /// reset) per e-mail address: nobody's mailbox is flooded through us.
+    pub mail_limit_per_address: RateLimit,
+    /// Account mails per client address.
+    pub mail_limit_per_ip: RateLimit,
+    /// The request header holding the client's address when the server
+    /// sits behind a reverse proxy that sets it (e.g. `X-Forwarded-For`:
+    /// its last entry is taken); empty means the connection's peer address.
+    pub client_ip_header: String,
+}
+
+/// At most `count` events per `window`, refilled evenly (a burst of
+/// `count`, then one per `window / count`). Written `"10 per 15m"`
+/// (humantime durations), or `"off"` for no limit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RateLimit {
+    /// Events per window; 0 means no limit.
+    pub count: u32,
+    /// The window.
+    pub window: Duration,
+}
+
+impl RateLimit {
+    /// `count` events per `window`.
+    pub const fn new(count: u32, window: Duration) -> RateLimit {
+        RateLimit { count, window }
+    }
+    /// No limit.
+    pub const OFF: RateLimit = RateLimit::new(0, Duration::ZERO);
+}
+
+impl fmt::Display for RateLimit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.count == 0 {
+            return f.write_str("off");
+        }
+        write!(f, "{} per {}", self.count, humantime::format_duration(self.window))
+    }
+}
+
+impl std::str::FromStr for RateLimit {
+    type Err = String;
+    fn from_str(text: &str) -> Result<RateLimit, String> {
+        let text = text.trim();
+        if text == "off" {
+            return Ok(RateLimit::OFF);
+        }
+        let bad = |why: String| format!("{text:?} is not a rate limit like \"10 per 15m\" or \"off\": {why}");
+        let (count, window) = text.split_once(" per ").ok_or_else(|| bad("no \" per \"".into()))?;
+        let count: u32 = count.trim().parse().map_err(|e| bad(format!("count: {e}")))?;
+        let window = humantime::parse_duration(window.trim()).map_err(|e| bad(format!("window: {e}")))?;
+        if count == 0 || window.is_zero() {
+            return Err(bad("the count and the window must be positive (or say \"off\")".into()));
+        }
+        Ok(RateLimit { count, window })
+    }
+}
+
+impl Serialize for RateLimit {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for RateLimit {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<RateLimit, D::Error> {
+        String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
+    }
 }
 
 impl Default for Config {
@@ -85,6 +159,11 @@ impl Default for Config {
             max_upload_bytes: 256 << 20,
             max_queued_jobs_per_user: 3,
             max_runs_per_day: 10,
+            login_limit_per_address: RateLimit::new(10, Duration::from_secs(15 * 60)),
+            login_limit_per_ip: RateLimit::new(30, Duration::from_secs(60)),
+            mail_limit_per_address: RateLimit::new(5, Duration::from_secs(3600)),
+            mail_limit_per_ip: RateLimit::new(20, Duration::from_secs(3600)),
+            client_ip_header: String::new(),
         }
     }
 }
@@ -145,5 +224,20 @@ mod tests {
         let error = Config::load(Some(&file)).unwrap_err().to_string();
         assert!(error.contains("bnid"), "{error}");
         assert!(Config::load(Some(&dir.path().join("missing.toml"))).is_err());
+    }
+
+    #[test]
+    fn rate_limits_read_as_count_per_duration() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("server.toml");
+        std::fs::write(&file, "login_limit_per_ip = \"5 per 2m\"\nmail_limit_per_ip = \"off\"\n").unwrap();
+        let config = Config::load(Some(&file)).unwrap();
+        assert_eq!(config.login_limit_per_ip, RateLimit::new(5, Duration::from_secs(120)));
+        assert_eq!(config.mail_limit_per_ip, RateLimit::OFF);
+        assert_eq!(config.login_limit_per_address, Config::default().login_limit_per_address);
+        assert_eq!(Config::default().login_limit_per_address.to_string(), "10 per 15m");
+        std::fs::write(&file, "login_limit_per_ip = \"5 a minute\"\n").unwrap();
+        let error = Config::load(Some(&file)).unwrap_err().to_string();
+        assert!(error.contains("10 per 15m"), "{error}");
     }
 }

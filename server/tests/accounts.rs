@@ -265,3 +265,290 @@ on_both_databases!(changing_the_password_or_deleting_the_account_needs_the_passw
     // The address is free again.
     assert_eq!(register(&script, &server.url, "kim@example.org", "a fresh start").await.status(), 201);
 });
+
+// ------------------------------------------------------------ hardening
+
+use fbksd_server::config::RateLimit;
+use std::time::{Duration, Instant};
+
+/// A client (with cookies) whose connections come from `ip`: any 127.x
+/// address reaches the loopback server, so a test has many clients.
+fn client_from(ip: &str) -> reqwest::Client {
+    let ip: std::net::IpAddr = ip.parse().unwrap();
+    reqwest::Client::builder().cookie_store(true).local_address(ip).build().unwrap()
+}
+
+/// Registers `email` from `client` and follows the mailed link.
+async fn verified(server: &common::TestServer, client: &reqwest::Client, email: &str, password: &str) {
+    assert_eq!(register(client, &server.url, email, password).await.status(), 201);
+    let link = server.link_in_mail(email, "/accounts/verify?token=");
+    assert_eq!(client.get(&link).send().await.unwrap().status(), 200);
+}
+
+/// A 429's Retry-After seconds and message, checking the body's code.
+async fn limited(response: reqwest::Response) -> (u64, String) {
+    assert_eq!(response.status(), 429);
+    let retry: u64 = response.headers()["retry-after"].to_str().unwrap().parse().unwrap();
+    assert!(retry > 0);
+    let body: Value = response.json().await.unwrap();
+    assert_eq!(body["error"], "rate_limited");
+    assert_eq!(body["retry_after_seconds"], retry);
+    (retry, body["message"].as_str().unwrap().to_string())
+}
+
+/// The hidden CSRF field of a page's form.
+fn csrf_in(page: &str) -> String {
+    let at = page.find("name=\"csrf_token\" value=\"").expect("a form with a CSRF token") + 25;
+    page[at..at + page[at..].find('"').unwrap()].to_string()
+}
+
+/// Posts a pre-login form (`/login`, `/register`, ...) from `client`, with
+/// the CSRF token of a freshly loaded log-in page.
+async fn post_form(
+    server: &common::TestServer,
+    client: &reqwest::Client,
+    path: &str,
+    fields: &[(&str, &str)],
+) -> reqwest::Response {
+    let page = client.get(format!("{}/login", server.url)).send().await.unwrap().text().await.unwrap();
+    let csrf = csrf_in(&page);
+    let mut form = vec![("csrf_token", csrf.as_str())];
+    form.extend_from_slice(fields);
+    client.post(format!("{}{path}", server.url)).form(&form).send().await.unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn log_in_floods_are_refused_per_address_and_per_client() {
+    let server = common::spawn_with(Db::Sqlite, |c| {
+        c.login_limit_per_address = RateLimit::new(3, Duration::from_secs(15 * 60));
+        c.login_limit_per_ip = RateLimit::new(6, Duration::from_secs(600));
+    })
+    .await;
+    let home = client_from("127.0.0.1");
+    for who in ["ada@example.org", "bob@example.org", "cy@example.org"] {
+        verified(&server, &home, who, "the right password").await;
+    }
+
+    // Guessing ada's password from one machine: three tries, then 429.
+    let attacker = client_from("127.0.0.2");
+    for _ in 0..3 {
+        assert_eq!(log_in(&attacker, &server.url, "ada@example.org", "a guessed password").await.status(), 401);
+    }
+    let (retry, message) = limited(log_in(&attacker, &server.url, "ADA@example.org", "another guess!").await).await;
+    assert!(message.contains("e-mail address") && message.contains("try again in"), "{message}");
+    assert!((250..=300).contains(&retry), "one attempt refills in 5 minutes: {retry}");
+    // The address is locked from everywhere, even with the right password...
+    let elsewhere = client_from("127.0.0.3");
+    assert_eq!(log_in(&elsewhere, &server.url, "ada@example.org", "the right password").await.status(), 429);
+    // ... but other addresses still log in, from the same machine too.
+    assert_eq!(log_in(&attacker, &server.url, "bob@example.org", "the right password").await.status(), 200);
+
+    // One machine trying many addresses runs into the per-client limit.
+    assert_eq!(log_in(&attacker, &server.url, "nobody1@example.org", "a guessed password").await.status(), 401);
+    let (_, message) = limited(log_in(&attacker, &server.url, "nobody2@example.org", "a guessed password").await).await;
+    assert!(message.contains("network address"), "{message}");
+    assert_eq!(log_in(&attacker, &server.url, "cy@example.org", "the right password").await.status(), 429);
+    assert_eq!(log_in(&elsewhere, &server.url, "cy@example.org", "the right password").await.status(), 200);
+
+    // The log-in form is limited alike, and says so on the page.
+    let form =
+        post_form(&server, &attacker, "/login", &[("email", "cy@example.org"), ("password", "the right password")])
+            .await;
+    assert_eq!(form.status(), 429);
+    assert!(form.headers().contains_key("retry-after"));
+    assert!(form.text().await.unwrap().contains("too many log-in attempts from your network address"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_unknown_address_takes_as_long_as_a_wrong_password() {
+    let server = common::spawn_with(Db::Sqlite, |c| {
+        c.login_limit_per_address = RateLimit::OFF;
+        c.login_limit_per_ip = RateLimit::OFF;
+    })
+    .await;
+    let client = server.browser();
+    verified(&server, &client, "bob@example.org", "the right password").await;
+    let median = |mut times: Vec<Duration>| {
+        times.sort();
+        times[times.len() / 2]
+    };
+    let (mut wrong, mut unknown) = (Vec::new(), Vec::new());
+    for i in 0..7 {
+        let started = Instant::now();
+        let answer = error_code(log_in(&client, &server.url, "bob@example.org", "wrong password!").await).await;
+        wrong.push(started.elapsed());
+        let started = Instant::now();
+        let other =
+            error_code(log_in(&client, &server.url, &format!("nobody{i}@example.org"), "wrong password!").await).await;
+        unknown.push(started.elapsed());
+        assert_eq!(answer, (401, "unauthorized".into()));
+        assert_eq!(answer, other, "the same answer");
+    }
+    let (wrong, unknown) = (median(wrong), median(unknown));
+    // Without a dummy hash an unknown address answers from one SELECT, in a
+    // small fraction of an argon2 verification.
+    assert!(unknown * 3 > wrong, "unknown address {unknown:?}, wrong password {wrong:?}");
+}
+
+/// The 64-hex-digit reset token in the latest reset mail to `email`.
+fn reset_token(server: &common::TestServer, email: &str) -> String {
+    let mail = server.mails_to(email).pop().unwrap();
+    assert!(mail.contains("reset"), "{mail}");
+    mail.split_whitespace().find(|w| w.len() == 64 && w.chars().all(|c| c.is_ascii_hexdigit())).unwrap().to_string()
+}
+
+async fn ask_reset(client: &reqwest::Client, url: &str, email: &str) -> reqwest::Response {
+    client.post(format!("{url}/api/v1/password-resets")).json(&json!({ "email": email })).send().await.unwrap()
+}
+
+async fn confirm_reset(client: &reqwest::Client, url: &str, token: &str, password: &str) -> reqwest::Response {
+    client
+        .post(format!("{url}/api/v1/password-resets/confirm"))
+        .json(&json!({ "token": token, "password": password }))
+        .send()
+        .await
+        .unwrap()
+}
+
+on_both_databases!(a_reset_ends_access_tokens_and_older_reset_links_and_verifies_the_address, |db: Db| async move {
+    let server = spawn(db).await;
+    let (browser, _) = signed_in(&server, "eve@example.org", "first password").await;
+    let token = signed_in_token(&server, "eve@example.org", "first password").await;
+    let script = reqwest::Client::new();
+    let me = |token: String| {
+        let (c, url) = (script.clone(), server.url.clone());
+        async move { c.get(format!("{url}/api/v1/me")).bearer_auth(token).send().await.unwrap().status() }
+    };
+    assert_eq!(me(token.clone()).await, 200);
+
+    // Two reset mails (a thief asked too, say); the later one is used.
+    assert_eq!(ask_reset(&script, &server.url, "eve@example.org").await.status(), 202);
+    let older = reset_token(&server, "eve@example.org");
+    assert_eq!(ask_reset(&script, &server.url, "eve@example.org").await.status(), 202);
+    let newer = reset_token(&server, "eve@example.org");
+    assert_ne!(older, newer);
+    let done = confirm_reset(&script, &server.url, &newer, "second password").await;
+    assert_eq!(done.status(), 200);
+    assert!(done.text().await.unwrap().contains("access tokens have ended"));
+
+    assert_eq!(me(token).await, 401, "the old access token ends");
+    assert_eq!(browser.get(format!("{}/api/v1/me", server.url)).send().await.unwrap().status(), 401, "sessions end");
+    assert_eq!(
+        error_code(confirm_reset(&script, &server.url, &older, "third password").await).await,
+        (400, "invalid_token".into()),
+        "the older reset link no longer works"
+    );
+    assert_eq!(log_in(&script, &server.url, "eve@example.org", "second password").await.status(), 200);
+
+    // Resetting the password of an unverified account verifies it: the mail was read.
+    assert_eq!(register(&script, &server.url, "una@example.org", "first password").await.status(), 201);
+    assert_eq!(
+        error_code(log_in(&script, &server.url, "una@example.org", "first password").await).await,
+        (403, "email_not_verified".into())
+    );
+    assert_eq!(ask_reset(&script, &server.url, "una@example.org").await.status(), 202);
+    let token = reset_token(&server, "una@example.org");
+    assert_eq!(confirm_reset(&script, &server.url, &token, "second password").await.status(), 200);
+    let body: Value = log_in(&script, &server.url, "una@example.org", "second password").await.json().await.unwrap();
+    assert_eq!(body["user"]["verified"], true, "{body}");
+});
+
+async fn resend(client: &reqwest::Client, url: &str, email: &str) -> reqwest::Response {
+    client.post(format!("{url}/api/v1/accounts/verification")).json(&json!({ "email": email })).send().await.unwrap()
+}
+
+on_both_databases!(the_verification_link_is_sent_again_on_request_within_limits, |db: Db| async move {
+    let server = common::spawn_with(db, |c| {
+        c.mail_limit_per_address = RateLimit::new(3, Duration::from_secs(3600));
+        c.mail_limit_per_ip = RateLimit::new(6, Duration::from_secs(3600));
+    })
+    .await;
+    let client = client_from("127.0.0.1");
+    assert_eq!(register(&client, &server.url, "una@example.org", "una's password").await.status(), 201);
+    let first = server.link_in_mail("una@example.org", "/accounts/verify?token=");
+
+    // Asked again: a second mail with a new link; the same answer for an
+    // unknown address, which gets nothing.
+    let again = resend(&client, &server.url, "una@example.org").await;
+    assert_eq!(again.status(), 202);
+    let unknown = resend(&client, &server.url, "nobody@example.org").await;
+    assert_eq!(unknown.status(), 202);
+    assert_eq!(again.text().await.unwrap(), unknown.text().await.unwrap());
+    assert!(server.mails_to("nobody@example.org").is_empty());
+    assert_eq!(server.mails_to("una@example.org").len(), 2);
+    let second = server.link_in_mail("una@example.org", "/accounts/verify?token=");
+    assert_ne!(first, second);
+
+    // A flood of requests for one address is cut off: una's mailbox gets
+    // three mails an hour at most.
+    assert_eq!(resend(&client, &server.url, "una@example.org").await.status(), 202);
+    let (_, message) = limited(resend(&client, &server.url, "una@example.org").await).await;
+    assert!(message.contains("mails to this e-mail address"), "{message}");
+    assert_eq!(server.mails_to("una@example.org").len(), 3);
+    // ... and so is one client asking for many addresses (6 requests so far).
+    assert_eq!(resend(&client, &server.url, "nobody2@example.org").await.status(), 202);
+    let (_, message) = limited(resend(&client, &server.url, "nobody3@example.org").await).await;
+    assert!(message.contains("from your network address"), "{message}");
+    let (_, message) = limited(ask_reset(&client, &server.url, "una@example.org").await).await;
+    assert!(message.contains("from your network address"), "password resets count as mail too: {message}");
+    assert_eq!(resend(&client_from("127.0.0.2"), &server.url, "nobody3@example.org").await.status(), 202);
+
+    // The newest link verifies.
+    assert_eq!(client.get(&second).send().await.unwrap().status(), 200);
+    assert_eq!(log_in(&client, &server.url, "una@example.org", "una's password").await.status(), 200);
+
+    // The log-in page offers the link again to an unverified account.
+    let browser = client_from("127.0.0.3");
+    assert_eq!(register(&browser, &server.url, "ida@example.org", "ida's password").await.status(), 201);
+    let refused =
+        post_form(&server, &browser, "/login", &[("email", "ida@example.org"), ("password", "ida's password")]).await;
+    assert_eq!(refused.status(), 403);
+    let page = refused.text().await.unwrap();
+    assert!(page.contains("action=\"/accounts/verification\"") && page.contains("Send the confirmation link again"));
+    let sent = post_form(&server, &browser, "/accounts/verification", &[("email", "ida@example.org")]).await;
+    assert_eq!(sent.status(), 200);
+    assert!(sent.text().await.unwrap().contains("new link is on its way"));
+    assert_eq!(server.mails_to("ida@example.org").len(), 2);
+});
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_log_in_flood_does_not_stall_other_requests() {
+    let server = common::spawn_with(Db::Sqlite, |c| {
+        c.login_limit_per_address = RateLimit::OFF;
+        c.login_limit_per_ip = RateLimit::OFF;
+    })
+    .await;
+    let client = server.browser();
+    verified(&server, &client, "bob@example.org", "the right password").await;
+    let board = format!("{}/api/v1/leaderboard", server.url);
+    assert_eq!(client.get(&board).send().await.unwrap().status(), 200);
+    let started = Instant::now();
+    assert_eq!(log_in(&client, &server.url, "bob@example.org", "a wrong password").await.status(), 401);
+    let one_login = started.elapsed();
+
+    const LOGINS: usize = 40;
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let flood: Vec<_> = (0..LOGINS)
+        .map(|_| {
+            let (client, url, done) = (reqwest::Client::new(), server.url.clone(), done.clone());
+            tokio::spawn(async move {
+                let status = log_in(&client, &url, "bob@example.org", "a wrong password").await.status();
+                done.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                status
+            })
+        })
+        .collect();
+    tokio::time::sleep(one_login.min(Duration::from_millis(200))).await;
+    let started = Instant::now();
+    assert_eq!(client.get(&board).send().await.unwrap().status(), 200);
+    let waited = started.elapsed();
+    let finished = done.load(std::sync::atomic::Ordering::SeqCst);
+    for login in flood {
+        assert_eq!(login.await.unwrap(), 401);
+    }
+    // Hashing on the async workers would make the board wait for about
+    // LOGINS / cores hashes; with the workers free it answers at once.
+    let bound = (one_login * 4).max(Duration::from_millis(200));
+    assert!(waited < bound, "the board took {waited:?} during the flood, after {finished} log-ins of {one_login:?}");
+    assert!(finished < LOGINS / 2, "the flood ({one_login:?} a log-in) ended before the board was asked: {finished}");
+}

@@ -1,8 +1,11 @@
-//! Registration, e-mail verification, logging in and out.
+//! Registration, e-mail verification, logging in and out, password
+//! resets and access tokens. Log-ins and account mails pass the rate
+//! limits first (`throttle`): refused, they answer 429 with `Retry-After`.
 
 use super::{Caller, SessionUser};
 use crate::accounts::{self, Email, Password};
 use crate::routes::ApiError;
+use crate::throttle::{ClientIp, Limited};
 use crate::AppState;
 use axum::extract::{Query, State};
 use axum::http::{header, StatusCode};
@@ -19,10 +22,56 @@ pub struct Credentials {
     password: String,
 }
 
+/// A refusal: an error, or a rate limit (which carries `Retry-After`).
+pub enum Refused {
+    /// Any other refusal.
+    Error(ApiError),
+    /// Over a rate limit.
+    Limited(Limited),
+}
+
+impl From<ApiError> for Refused {
+    fn from(e: ApiError) -> Self {
+        Refused::Error(e)
+    }
+}
+
+impl From<crate::error::ServiceError> for Refused {
+    fn from(e: crate::error::ServiceError) -> Self {
+        Refused::Error(e.into())
+    }
+}
+
+impl From<sqlx::Error> for Refused {
+    fn from(e: sqlx::Error) -> Self {
+        Refused::Error(e.into())
+    }
+}
+
+impl From<Limited> for Refused {
+    fn from(l: Limited) -> Self {
+        Refused::Limited(l)
+    }
+}
+
+impl IntoResponse for Refused {
+    fn into_response(self) -> Response {
+        match self {
+            Refused::Error(e) => e.into_response(),
+            Refused::Limited(l) => l.into_response(),
+        }
+    }
+}
+
 /// `POST /api/v1/accounts`: creates an account and mails a verification link.
-pub async fn register(State(state): State<AppState>, Json(body): Json<Credentials>) -> Result<Response, ApiError> {
+pub async fn register(
+    State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
+    Json(body): Json<Credentials>,
+) -> Result<Response, Refused> {
     let email = Email::parse(&body.email)?;
     let password = Password::parse(&body.password)?;
+    state.throttle.mail(ip, email.as_str())?;
     let user = accounts::register(&state, &email, &password).await?;
     Ok((StatusCode::CREATED, Json(json!({ "id": user.id, "email": user.email, "verified": false }))).into_response())
 }
@@ -64,9 +113,38 @@ pub async fn verify_link(State(state): State<AppState>, Query(body): Query<Token
     }
 }
 
+/// An address asking for something by mail.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AddressBody {
+    email: String,
+}
+
+/// The answer to a verification request, the same whether or not the
+/// address has an account waiting, so it reveals no accounts.
+pub const VERIFICATION_SENT: &str = "if this address has an account waiting for confirmation, a new link is on its way";
+
+/// `POST /api/v1/accounts/verification`: mails the verification link again.
+pub async fn resend_verification(
+    State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
+    Json(body): Json<AddressBody>,
+) -> Result<(StatusCode, Json<serde_json::Value>), Refused> {
+    let email = Email::parse(&body.email)?;
+    state.throttle.mail(ip, email.as_str())?;
+    accounts::resend_verification(&state, &email).await?;
+    Ok((StatusCode::ACCEPTED, Json(json!({ "message": VERIFICATION_SENT }))))
+}
+
 /// `POST /api/v1/sessions`: logs in; sets the session cookie and returns the CSRF token.
-pub async fn log_in(State(state): State<AppState>, Json(body): Json<Credentials>) -> Result<Response, ApiError> {
+pub async fn log_in(
+    State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
+    Json(body): Json<Credentials>,
+) -> Result<Response, Refused> {
+    let attempt = state.throttle.log_in(ip, &body.email)?;
     let user = accounts::authenticate(&state.pool, &body.email, &body.password).await?;
+    attempt.succeeded();
     let session = accounts::open_session(&state.pool, &user.id, state.config.session_hours).await?;
     let cookie = super::session_cookie(&state, &session.token);
     Ok(([(header::SET_COOKIE, cookie)], Json(json!({ "user": user, "csrf_token": session.csrf_token })))
@@ -129,20 +207,15 @@ pub async fn delete_account(
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// An address asking for a password reset.
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ResetRequest {
-    email: String,
-}
-
 /// `POST /api/v1/password-resets`: mails a reset link if the address has an
 /// account. The answer is the same either way, so it reveals no accounts.
 pub async fn request_password_reset(
     State(state): State<AppState>,
-    Json(body): Json<ResetRequest>,
-) -> Result<(StatusCode, Json<serde_json::Value>), ApiError> {
+    ClientIp(ip): ClientIp,
+    Json(body): Json<AddressBody>,
+) -> Result<(StatusCode, Json<serde_json::Value>), Refused> {
     let email = Email::parse(&body.email)?;
+    state.throttle.mail(ip, email.as_str())?;
     accounts::mail_password_reset(&state, &email).await?;
     let message = "if this address has an account, a reset token is on its way";
     Ok((StatusCode::ACCEPTED, Json(json!({ "message": message }))))
@@ -157,15 +230,16 @@ pub struct PasswordReset {
 }
 
 /// `POST /api/v1/password-resets/confirm`: sets the new password; every
-/// session ends.
+/// session and access token ends, other reset tokens die, and the address
+/// counts as verified.
 pub async fn reset_password(
     State(state): State<AppState>,
     Json(body): Json<PasswordReset>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let password = Password::parse(&body.password)?;
-    let user_id = accounts::redeem_email_token(&state.pool, &body.token, "reset").await?;
-    accounts::set_password(&state.pool, &user_id, &password).await?;
-    Ok(Json(json!({ "changed": true })))
+    accounts::reset_password(&state.pool, &body.token, &password).await?;
+    let message = "password changed: log in again; your sessions and access tokens have ended";
+    Ok(Json(json!({ "changed": true, "message": message })))
 }
 
 /// A new token's name.

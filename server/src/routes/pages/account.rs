@@ -1,6 +1,9 @@
-//! Pages of one's account: log-in, registration, log-out and access tokens.
+//! Pages of one's account: log-in, registration, the verification link
+//! again, log-out and access tokens. The log-in and registration forms
+//! pass the same rate limits as the API.
 
 use super::*;
+use crate::throttle::{ClientIp, Limited};
 
 #[derive(Template)]
 #[template(path = "credentials.html")]
@@ -12,9 +15,15 @@ struct CredentialsPage {
     email: String,
     error: String,
     password_autocomplete: &'static str,
+    /// Offer to mail the verification link again (the address is not verified).
+    resend: bool,
 }
 
 fn credentials_page(register: bool, email: &str, error: &str, status: StatusCode) -> Response {
+    credentials_page_offering(register, email, error, status, false)
+}
+
+fn credentials_page_offering(register: bool, email: &str, error: &str, status: StatusCode, resend: bool) -> Response {
     let csrf = accounts::random_token();
     let page = CredentialsPage {
         nav: Nav { user: None, csrf: String::new() },
@@ -24,9 +33,20 @@ fn credentials_page(register: bool, email: &str, error: &str, status: StatusCode
         email: email.into(),
         error: error.into(),
         password_autocomplete: if register { "new-password" } else { "current-password" },
+        resend,
     };
     let cookie = format!("{FORM_COOKIE}={csrf}; Path=/; HttpOnly; SameSite=Strict; Max-Age=3600");
     (status, [(header::SET_COOKIE, cookie)], render(&page)).into_response()
+}
+
+/// The form again, saying what was limited and when to retry.
+fn limited_page(register: bool, email: &str, limited: Limited) -> Response {
+    let mut page = credentials_page(register, email, &limited.message(), StatusCode::TOO_MANY_REQUESTS);
+    let (name, value) = limited.header();
+    if let Ok(value) = value.parse() {
+        page.headers_mut().insert(name, value);
+    }
+    page
 }
 
 /// `GET /login`.
@@ -59,17 +79,24 @@ fn check_form_cookie(headers: &axum::http::HeaderMap, sent: &str) -> Result<(), 
 /// `POST /login`.
 pub async fn login(
     State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
     headers: axum::http::HeaderMap,
     Form(form): Form<CredentialsForm>,
 ) -> PageResult {
     check_form_cookie(&headers, &form.csrf_token)?;
+    let attempt = match state.throttle.log_in(ip, &form.email) {
+        Ok(attempt) => attempt,
+        Err(limited) => return Ok(limited_page(false, &form.email, limited)),
+    };
     let user = match accounts::authenticate(&state.pool, &form.email, &form.password).await {
         Ok(user) => user,
         Err(e) => {
+            let unverified = e.code == "email_not_verified";
             let e = ApiError::from(e);
-            return Ok(credentials_page(false, &form.email, &e.message, e.status));
+            return Ok(credentials_page_offering(false, &form.email, &e.message, e.status, unverified));
         }
     };
+    attempt.succeeded();
     let session = accounts::open_session(&state.pool, &user.id, state.config.session_hours).await?;
     let cookie = crate::routes::session_cookie(&state, &session.token);
     Ok(([(header::SET_COOKIE, cookie)], Redirect::to("/projects")).into_response())
@@ -78,6 +105,7 @@ pub async fn login(
 /// `POST /register`.
 pub async fn register(
     State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
     headers: axum::http::HeaderMap,
     Form(form): Form<CredentialsForm>,
 ) -> PageResult {
@@ -90,12 +118,47 @@ pub async fn register(
             return Ok(credentials_page(true, &form.email, &e.message, e.status));
         }
     };
+    if let Err(limited) = state.throttle.mail(ip, email.as_str()) {
+        return Ok(limited_page(true, &form.email, limited));
+    }
     if let Err(e) = crate::accounts::register(&state, &email, &password).await {
         let e = ApiError::from(e);
         return Ok(credentials_page(true, &form.email, &e.message, e.status));
     }
     let nav = Nav { user: None, csrf: String::new() };
     Ok(message(nav, "Check your mail", format!("We sent a confirmation link to {}.", email.as_str())))
+}
+
+/// The log-in page's "send the link again" button.
+#[derive(Deserialize)]
+pub struct AddressForm {
+    csrf_token: String,
+    email: String,
+}
+
+/// `POST /accounts/verification`: mails the verification link again; the
+/// same answer whether or not the address has an account waiting.
+pub async fn resend_verification(
+    State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
+    headers: axum::http::HeaderMap,
+    Form(form): Form<AddressForm>,
+) -> PageResult {
+    check_form_cookie(&headers, &form.csrf_token)?;
+    let email = match Email::parse(&form.email) {
+        Ok(email) => email,
+        Err(e) => {
+            let e = ApiError::from(e);
+            return Ok(credentials_page(false, &form.email, &e.message, e.status));
+        }
+    };
+    if let Err(limited) = state.throttle.mail(ip, email.as_str()) {
+        return Ok(limited_page(false, &form.email, limited));
+    }
+    accounts::resend_verification(&state, &email).await?;
+    let nav = Nav { user: None, csrf: String::new() };
+    let text = format!("If {} has an account waiting for confirmation, a new link is on its way.", email.as_str());
+    Ok(message(nav, "Check your mail", text))
 }
 
 /// `POST /logout`.
