@@ -57,7 +57,11 @@ pub async fn start_season(state: &AppState, note: &str) -> Result<SeasonStarted,
     crate::results::boards_changed(&state.pool).await?;
     let mut started = SeasonStarted { season: previous + 1, queued: Vec::new(), skipped: Vec::new() };
     for set in published {
-        let project = crate::projects::by_name(&state.pool, &set.technique).await?;
+        // By id: a deleted project's name may since belong to someone else.
+        let project = match &set.project_id {
+            Some(id) => crate::projects::by_id(&state.pool, id).await?,
+            None => None,
+        };
         let owner = match &project {
             Some(p) => crate::accounts::user_by_id(&state.pool, &p.owner_id).await?,
             None => None,

@@ -26,6 +26,8 @@ pub struct AppState {
     pub job_queued: Arc<tokio::sync::Notify>,
     /// Leaderboards kept in memory.
     pub boards: crate::leaderboard::BoardCache,
+    /// Rate limits on log-ins and account mail.
+    pub throttle: crate::throttle::Throttle,
 }
 
 impl AppState {
@@ -85,6 +87,8 @@ impl Application {
             crate::git::GitHost::open(&config.data_dir, config.max_push_bytes, &crate::pipelines::pre_receive_hook())
                 .map_err(|e| anyhow::anyhow!("git repositories in {}: {e}", config.data_dir.display()))?;
         let postgres = config.database_url().starts_with("postgres");
+        keep_private(&config.data_dir)
+            .map_err(|e| anyhow::anyhow!("data directory {}: {e}", config.data_dir.display()))?;
 
         // Leases expire even when no runner polls.
         let sweeper = pool.clone();
@@ -108,7 +112,20 @@ impl Application {
             postgres,
             job_queued: Arc::new(tokio::sync::Notify::new()),
             boards: Default::default(),
+            throttle: crate::throttle::Throttle::new(&config),
         };
+        // What ended jobs or a crash left in `uploads/`: at start, then hourly.
+        let housekeeper = state.clone();
+        tokio::spawn(async move {
+            loop {
+                match crate::pipelines::sweep_uploads(&housekeeper).await {
+                    Ok(0) => {}
+                    Ok(n) => tracing::info!("removed the uploads of {n} jobs that are not running"),
+                    Err(e) => tracing::warn!("sweeping uploads: {}", e.message),
+                }
+                tokio::time::sleep(std::time::Duration::from_secs(3600)).await;
+            }
+        });
         Ok(Application { listener, router: crate::routes::router(state), admin, registration_token, url, config })
     }
 
@@ -139,8 +156,41 @@ impl Application {
         self.registration_token.as_deref()
     }
 
-    /// Serves until the process is stopped.
+    /// Serves until the process is stopped. Connections time out
+    /// (`routes::limits`): the first request's headers within
+    /// `HEADER_READ_TIMEOUT`, then no silence longer than `IDLE_TIMEOUT`
+    /// (or twice the runners' long poll, if that is longer).
     pub async fn run(self) -> std::io::Result<()> {
-        axum::serve(self.listener, self.router).await
+        use crate::routes::limits::{TimedListener, HEADER_READ_TIMEOUT, IDLE_TIMEOUT};
+        use axum::serve::ListenerExt;
+        // The peer address feeds the per-client rate limits (`throttle::ClientIp`).
+        let service = self.router.into_make_service_with_connect_info::<std::net::SocketAddr>();
+        let idle = IDLE_TIMEOUT.max(std::time::Duration::from_secs(2 * self.config.long_poll_seconds + 30));
+        // `tap_io` (a no-op) is what gives a wrapped listener's connections their peer address.
+        let listener = TimedListener::new(self.listener, HEADER_READ_TIMEOUT, idle).tap_io(|_| {});
+        axum::serve(listener, service).await
     }
+}
+
+/// Owner-only modes for what the data directory holds: the database,
+/// mail (sign-in links), repositories, uploads and result sets. Files
+/// created later inside these directories are out of others' reach
+/// whatever the umask.
+fn keep_private(data_dir: &std::path::Path) -> std::io::Result<()> {
+    use std::os::unix::fs::PermissionsExt;
+    let private_dir = std::fs::Permissions::from_mode(0o700);
+    std::fs::set_permissions(data_dir, private_dir.clone())?;
+    for name in ["outbox", "results", "uploads", "git", "git-hooks"] {
+        let dir = data_dir.join(name);
+        std::fs::create_dir_all(&dir)?;
+        std::fs::set_permissions(&dir, private_dir.clone())?;
+    }
+    // The SQLite database and its journals, the runner's token file, …
+    for entry in std::fs::read_dir(data_dir)? {
+        let entry = entry?;
+        if entry.file_type()?.is_file() {
+            std::fs::set_permissions(entry.path(), std::fs::Permissions::from_mode(0o600))?;
+        }
+    }
+    Ok(())
 }

@@ -63,6 +63,23 @@ pub struct Job {
     pub result_id: Option<String>,
 }
 
+impl Job {
+    /// The job as a reader who may not see its result set reads it: the
+    /// set's id leaves the JSON and the message (see
+    /// [`crate::results::private_result_of`]).
+    pub fn without_result(mut self) -> Job {
+        if let Some(id) = self.result_id.take() {
+            self.message = hide_result(&self.message, &id);
+        }
+        self
+    }
+}
+
+/// `text` (a job's message or log) with the private result set `id` left out.
+pub fn hide_result(text: &str, id: &str) -> String {
+    text.replace(id, "<private>")
+}
+
 const JOB_COLUMNS: &str = "j.id, j.pipeline_id, j.project_id, p.name AS project_name, j.user_id, j.kind, j.state, \
      j.failure_reason, j.message, j.attempts, j.max_attempts, j.runner_id, pl.commit_sha, j.season, j.created_at, \
      j.started_at, j.finished_at, r.id AS result_id";
@@ -143,8 +160,12 @@ pub struct Claimed {
     pub token: String,
 }
 
-/// Hands the oldest queued build or benchmark job to `runner_id`, if any;
-/// a service account's jobs (the baselines) wait while a user's job is queued.
+/// Hands a queued build or benchmark job to `runner_id`, if any, fairly
+/// between users: a service account's jobs (the baselines) wait while a
+/// user's job is queued; then the user with the fewest jobs running goes
+/// first, and among those the one whose last job started longest ago
+/// (round robin), so one user's hundred queued jobs do not hold back
+/// another's one; a user's own jobs go oldest first.
 pub async fn claim(
     pool: &AnyPool,
     postgres: bool,
@@ -159,7 +180,10 @@ pub async fn claim(
          attempts = attempts + 1, started_at = COALESCE(started_at, $4) \
          WHERE state = 'queued' AND id = (SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
          WHERE j.state = 'queued' AND j.kind <> 'publish' \
-         ORDER BY u.is_service, j.created_at, j.id LIMIT 1{lock}) RETURNING id"
+         ORDER BY u.is_service, \
+         (SELECT COUNT(*) FROM jobs r WHERE r.user_id = j.user_id AND r.state = 'running'), \
+         (SELECT COALESCE(MAX(r.started_at), 0) FROM jobs r WHERE r.user_id = j.user_id), \
+         j.created_at, j.id LIMIT 1{lock}) RETURNING id"
     ))
     .bind(runner_id)
     .bind(crate::accounts::digest(&token))
@@ -203,8 +227,10 @@ pub async fn heartbeat(pool: &AnyPool, job_id: &str, lease_ms: i64) -> Result<()
     Ok(())
 }
 
-/// Appends to a job's log unless it would pass `max_bytes`; returns
-/// whether it was appended.
+/// Appends to a job's log, keeping it within `max_bytes`: text that would
+/// pass the limit is cut there and ends with a line saying so, and once the
+/// log is full nothing more of the runner's is kept. Returns whether all of
+/// `text` was kept (the runner stops sending when not).
 pub async fn append_log(
     pool: &AnyPool,
     job_id: &str,
@@ -213,15 +239,28 @@ pub async fn append_log(
     max_bytes: i64,
 ) -> Result<bool, sqlx::Error> {
     let mut tx = pool.begin().await?;
-    let grown = sqlx::query("UPDATE jobs SET log_bytes = log_bytes + $1 WHERE id = $2 AND log_bytes + $1 <= $3")
-        .bind(text.len() as i64)
-        .bind(job_id)
-        .bind(max_bytes)
-        .execute(&mut *tx)
-        .await?;
-    if grown.rows_affected() == 0 {
+    let Some(row) =
+        sqlx::query("SELECT log_bytes FROM jobs WHERE id = $1").bind(job_id).fetch_optional(&mut *tx).await?
+    else {
         return Ok(false);
-    }
+    };
+    let used: i64 = row.try_get("log_bytes")?;
+    let room = max_bytes.saturating_sub(used);
+    let marker = format!("\n[fbksd] the log reached its limit of {max_bytes} bytes: later output is left out\n");
+    let (kept, all) = if text.len() as i64 <= room {
+        (std::borrow::Cow::Borrowed(text), true)
+    } else if room <= marker.len() as i64 {
+        return Ok(false);
+    } else {
+        let mut end = (room as usize - marker.len()).min(text.len());
+        while !text.is_char_boundary(end) {
+            end -= 1;
+        }
+        (std::borrow::Cow::Owned(format!("{}{marker}", &text[..end])), false)
+    };
+    // A cut log is full: the next batch of the runner's is refused at once.
+    let grown = if all { used + kept.len() as i64 } else { max_bytes };
+    sqlx::query("UPDATE jobs SET log_bytes = $1 WHERE id = $2").bind(grown).bind(job_id).execute(&mut *tx).await?;
     let next = sqlx::query("SELECT COALESCE(MAX(seq), 0) + 1 AS next FROM job_logs WHERE job_id = $1")
         .bind(job_id)
         .fetch_one(&mut *tx)
@@ -230,12 +269,12 @@ pub async fn append_log(
         .bind(job_id)
         .bind(next.try_get::<i64, _>("next")?)
         .bind(attempt)
-        .bind(text)
+        .bind(kept.as_ref())
         .bind(now_ms())
         .execute(&mut *tx)
         .await?;
     tx.commit().await?;
-    Ok(true)
+    Ok(all)
 }
 
 /// A job's log chunks after `after` (a sequence number): (seq, text).
@@ -477,6 +516,44 @@ pub async fn succeed_with_results(
     Ok(ended.rows_affected() > 0)
 }
 
+/// The id a running job's result set will have: chosen on the first call
+/// and kept, so every retry of storing it agrees on where its files go.
+pub async fn pending_result_id(pool: &AnyPool, job_id: &str) -> Result<String, sqlx::Error> {
+    sqlx::query("UPDATE jobs SET result_pending = $1 WHERE id = $2 AND result_pending IS NULL")
+        .bind(uuid::Uuid::new_v4().to_string())
+        .bind(job_id)
+        .execute(pool)
+        .await?;
+    sqlx::query("SELECT result_pending FROM jobs WHERE id = $1").bind(job_id).fetch_one(pool).await?.try_get(0)
+}
+
+/// Forgets a job's pending result id (its attempt ended without a set);
+/// returns it, if there was one.
+pub async fn take_pending_result_id(pool: &AnyPool, job_id: &str) -> Result<Option<String>, sqlx::Error> {
+    let row = sqlx::query("SELECT result_pending FROM jobs WHERE id = $1 AND state <> 'succeeded'")
+        .bind(job_id)
+        .fetch_optional(pool)
+        .await?;
+    let pending: Option<String> = row.map(|r| r.try_get(0)).transpose()?.flatten();
+    if pending.is_some() {
+        sqlx::query("UPDATE jobs SET result_pending = NULL WHERE id = $1").bind(job_id).execute(pool).await?;
+    }
+    Ok(pending)
+}
+
+/// Jobs that are not running, of the ids given: their uploads are stale.
+pub async fn not_running(pool: &AnyPool, job_ids: &[String]) -> Result<Vec<String>, sqlx::Error> {
+    let mut out = Vec::new();
+    for id in job_ids {
+        let row = sqlx::query("SELECT state FROM jobs WHERE id = $1").bind(id).fetch_optional(pool).await?;
+        let running = row.map(|r| r.try_get::<String, _>(0)).transpose()?.is_some_and(|s| s == "running");
+        if !running {
+            out.push(id.clone());
+        }
+    }
+    Ok(out)
+}
+
 /// Ends the leases of a removed runner's running jobs, so the sweeper
 /// queues them again at once.
 pub async fn drop_leases_of(pool: &AnyPool, runner_id: &str) -> Result<(), sqlx::Error> {
@@ -520,13 +597,15 @@ pub async fn queued_count(pool: &AnyPool, user_id: &str) -> Result<i64, sqlx::Er
     row.try_get("n")
 }
 
-/// Benchmark runs of a user in the last 24 hours that count for the quota.
-pub async fn runs_today(pool: &AnyPool, user_id: &str) -> Result<i64, sqlx::Error> {
+/// Jobs of `kind` (benchmark runs, or builds) of a user in the last 24
+/// hours that count for the quota.
+pub async fn counted_today(pool: &AnyPool, user_id: &str, kind: JobKind) -> Result<i64, sqlx::Error> {
     let row = sqlx::query(
-        "SELECT COUNT(*) AS n FROM jobs WHERE user_id = $1 AND kind = 'benchmark' AND counts_for_quota = 1 \
-         AND created_at > $2",
+        "SELECT COUNT(*) AS n FROM jobs WHERE user_id = $1 AND kind = $2 AND counts_for_quota = 1 \
+         AND created_at > $3",
     )
     .bind(user_id)
+    .bind(kind.as_str())
     .bind(now_ms() - 24 * 3600 * 1000)
     .fetch_one(pool)
     .await?;

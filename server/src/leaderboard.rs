@@ -139,15 +139,48 @@ struct SeasonData {
     boards: Mutex<HashMap<BoardKey, Arc<Board>>>,
 }
 
-/// Seasons' published data kept in memory, by season.
+/// Seasons kept in memory at most: the season is a query parameter, so
+/// without a bound any number of (even empty) seasons could be loaded.
+pub const MAX_CACHED_SEASONS: usize = 8;
+
+/// Seasons' published data kept in memory, by season; the least recently
+/// read season leaves first.
 #[derive(Clone, Default)]
-pub struct BoardCache(Arc<Mutex<HashMap<i64, Arc<SeasonData>>>>);
+pub struct BoardCache(Arc<Mutex<CachedSeasons>>);
+
+#[derive(Default)]
+struct CachedSeasons {
+    /// Season → (data, when it was last read, by `clock`).
+    seasons: HashMap<i64, (Arc<SeasonData>, u64)>,
+    clock: u64,
+}
+
+impl CachedSeasons {
+    fn get(&mut self, season: i64) -> Option<Arc<SeasonData>> {
+        self.clock += 1;
+        let clock = self.clock;
+        self.seasons.get_mut(&season).map(|(data, used)| {
+            *used = clock;
+            data.clone()
+        })
+    }
+
+    fn keep(&mut self, season: i64, data: Arc<SeasonData>) {
+        self.clock += 1;
+        if !self.seasons.contains_key(&season) && self.seasons.len() >= MAX_CACHED_SEASONS {
+            if let Some(oldest) = self.seasons.iter().min_by_key(|(_, (_, used))| *used).map(|(s, _)| *s) {
+                self.seasons.remove(&oldest);
+            }
+        }
+        self.seasons.insert(season, (data, self.clock));
+    }
+}
 
 impl BoardCache {
     async fn season(&self, pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
         use crate::results::Selection;
         let version = crate::results::board_version(pool).await?;
-        if let Some(data) = self.0.lock().ok().and_then(|m| m.get(&season).cloned()) {
+        if let Some(data) = self.0.lock().ok().and_then(|mut m| m.get(season)) {
             if data.version == version {
                 return Ok(data);
             }
@@ -163,7 +196,7 @@ impl BoardCache {
             boards: Mutex::new(HashMap::new()),
         });
         if let Ok(mut map) = self.0.lock() {
-            map.insert(season, data.clone());
+            map.keep(season, data.clone());
         }
         Ok(data)
     }
@@ -353,6 +386,7 @@ mod tests {
             id: id.into(),
             technique: technique.into(),
             project: Some(technique.into()),
+            project_id: Some(format!("project-{technique}")),
             user_id: None,
             info: serde_json::json!({}),
             commit_sha: String::new(),
@@ -428,6 +462,29 @@ mod tests {
             })
             .collect();
         r
+    }
+
+    #[test]
+    fn the_season_cache_keeps_a_bounded_number_of_seasons_the_least_recently_read_leaving_first() {
+        let empty = || {
+            Arc::new(SeasonData {
+                version: 0,
+                sets: Vec::new(),
+                runs: Vec::new(),
+                tags: BTreeMap::new(),
+                boards: Mutex::new(HashMap::new()),
+            })
+        };
+        let mut cache = CachedSeasons::default();
+        cache.keep(1, empty());
+        // Asking for season after season (a query parameter) never grows it past the bound.
+        for season in 2..1000 {
+            assert!(cache.get(1).is_some(), "the season read all along stays");
+            cache.keep(season, empty());
+            assert!(cache.seasons.len() <= MAX_CACHED_SEASONS);
+        }
+        assert_eq!(cache.seasons.len(), MAX_CACHED_SEASONS);
+        assert!(cache.get(999).is_some() && cache.get(2).is_none());
     }
 
     #[test]

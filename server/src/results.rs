@@ -1,6 +1,6 @@
 //! Result sets: what a successful benchmark job uploaded, stored once and
 //! never changed, under a random UUID. Publishing puts a set on its
-//! season's leaderboard (one published set per technique and season);
+//! season's leaderboard (one published set per project and season);
 //! unpublishing takes it off; discarding deletes it; an administrator can
 //! hide a set that breaks the rules.
 //!
@@ -52,6 +52,24 @@ pub async fn visible(
     }
 }
 
+/// The id of the result set `job` produced if `viewer` may not see it: a
+/// set is its owner's (and administrators') until it is published and not
+/// hidden, and the job's message and log name it, so readers of a public
+/// project's jobs get them without it ([`crate::jobs::Job::without_result`],
+/// [`crate::jobs::hide_result`]).
+pub async fn private_result_of(
+    pool: &AnyPool,
+    job: &crate::jobs::Job,
+    viewer: Option<&crate::accounts::User>,
+) -> Result<Option<String>, sqlx::Error> {
+    let Some(id) = &job.result_id else { return Ok(None) };
+    if viewer.is_some_and(|u| u.id == job.user_id || u.is_admin) {
+        return Ok(None);
+    }
+    let public = get(pool, id).await?.is_some_and(|set| set.is_public());
+    Ok((!public).then(|| id.clone()))
+}
+
 /// A stored result set's summary.
 #[derive(Debug, Clone, Serialize)]
 pub struct ResultSet {
@@ -61,6 +79,10 @@ pub struct ResultSet {
     pub technique: String,
     /// Its project's name, if the project still exists.
     pub project: Option<String>,
+    /// Its project's id, while the project exists: what the set belongs to
+    /// (a deleted project's name may be taken again by someone else).
+    #[serde(skip)]
+    pub project_id: Option<String>,
     /// Owner, while the account exists.
     pub user_id: Option<String>,
     /// The technique's info.json at the commit.
@@ -128,8 +150,8 @@ pub struct StoredRun {
     pub repeats: Vec<Repeat>,
 }
 
-const SET_COLUMNS: &str = "r.id, r.technique, p.name AS project_name, r.user_id, r.info, r.commit_sha, r.season, \
-     r.provenance, r.metrics, r.created_at, r.published_at, r.hidden_reason";
+const SET_COLUMNS: &str = "r.id, r.technique, p.name AS project_name, p.id AS project_id, r.user_id, r.info, \
+     r.commit_sha, r.season, r.provenance, r.metrics, r.created_at, r.published_at, r.hidden_reason";
 
 fn set_of(row: &sqlx::any::AnyRow) -> Result<ResultSet, sqlx::Error> {
     let json = |column: &str| -> Result<serde_json::Value, sqlx::Error> {
@@ -140,6 +162,7 @@ fn set_of(row: &sqlx::any::AnyRow) -> Result<ResultSet, sqlx::Error> {
         id: row.try_get("id")?,
         technique: row.try_get("technique")?,
         project: row.try_get("project_name")?,
+        project_id: row.try_get("project_id")?,
         user_id: row.try_get("user_id")?,
         info: json("info")?,
         commit_sha: row.try_get("commit_sha")?,
@@ -303,6 +326,9 @@ pub async fn scene_tags(
 
 /// Everything needed to store a result set, decided before the transaction.
 pub struct NewResultSet<'a> {
+    /// Its id (a random UUID: the private page's key), chosen before its
+    /// files are moved under it.
+    pub id: &'a str,
     /// The job that produced it.
     pub job_id: &'a str,
     /// Its project.
@@ -325,10 +351,10 @@ pub struct NewResultSet<'a> {
 
 /// Inserts a result set and its runs and scenes inside `tx`; returns its UUID.
 pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSet<'_>) -> Result<String, sqlx::Error> {
-    let id = uuid::Uuid::new_v4().to_string();
+    let id = new.id.to_string();
     let now = now_ms();
     if new.publish {
-        unpublish_others(tx, new.technique, new.season).await?;
+        unpublish_others(tx, Some(new.project_id), new.season).await?;
         boards_changed(&mut **tx).await?;
     }
     sqlx::query(
@@ -400,14 +426,18 @@ pub async fn board_version(pool: &AnyPool) -> Result<i64, sqlx::Error> {
     sqlx::query("SELECT version FROM board_version WHERE id = 1").fetch_one(pool).await?.try_get("version")
 }
 
-/// One published set per technique and season.
+/// One published set per project and season. By project, not by name: a
+/// deleted project's published sets stay on the board, and whoever takes
+/// its name again publishes beside them, never over them. A set whose
+/// project is gone replaces nothing.
 async fn unpublish_others(
     tx: &mut sqlx::Transaction<'_, sqlx::Any>,
-    technique: &str,
+    project_id: Option<&str>,
     season: i64,
 ) -> Result<(), sqlx::Error> {
-    sqlx::query("UPDATE result_sets SET published_at = NULL WHERE technique = $1 AND season = $2")
-        .bind(technique)
+    let Some(project_id) = project_id else { return Ok(()) };
+    sqlx::query("UPDATE result_sets SET published_at = NULL WHERE project_id = $1 AND season = $2")
+        .bind(project_id)
         .bind(season)
         .execute(&mut **tx)
         .await?;
@@ -427,14 +457,14 @@ pub async fn owned(pool: &AnyPool, id: &str, user_id: &str) -> Result<ResultSet,
     }
 }
 
-/// Puts the set on its season's leaderboard, replacing the technique's
+/// Puts the set on its season's leaderboard, replacing its project's
 /// previously published set there.
 pub async fn publish(pool: &AnyPool, set: &ResultSet) -> Result<(), ServiceError> {
     if set.hidden_reason.is_some() {
         return Err(ServiceError::forbidden("hidden", "an administrator hid this result set; it cannot be published"));
     }
     let mut tx = pool.begin().await?;
-    unpublish_others(&mut tx, &set.technique, set.season).await?;
+    unpublish_others(&mut tx, set.project_id.as_deref(), set.season).await?;
     sqlx::query("UPDATE result_sets SET published_at = $1 WHERE id = $2")
         .bind(now_ms())
         .bind(&set.id)

@@ -8,10 +8,14 @@
 //!   `csrf_token` field), or it is refused with 403;
 //! - scripts and git send a personal access token as
 //!   `Authorization: Bearer fbksd_…`; no cookie, so no CSRF check.
+//!
+//! Every answer gets the security headers of [`limits`], which also counts
+//! the live-log streams a caller holds and times out silent connections.
 
 mod accounts;
 mod admin;
 pub mod error;
+pub mod limits;
 mod pages;
 mod projects;
 mod results;
@@ -45,6 +49,7 @@ pub fn router(state: AppState) -> Router {
         // Users, from browsers or scripts.
         .route("/api/v1/accounts", post(accounts::register))
         .route("/api/v1/accounts/verify", post(accounts::verify))
+        .route("/api/v1/accounts/verification", post(accounts::resend_verification))
         .route("/accounts/verify", get(accounts::verify_link))
         .route("/api/v1/sessions", post(accounts::log_in).delete(accounts::log_out))
         .route("/api/v1/me", get(accounts::me).patch(accounts::change_password).delete(accounts::delete_account))
@@ -91,6 +96,7 @@ pub fn router(state: AppState) -> Router {
         .route("/static/viewer/{name}", get(pages::viewer_file))
         .route("/login", get(pages::login_form).post(pages::login))
         .route("/register", get(pages::register_form).post(pages::register))
+        .route("/accounts/verification", post(pages::resend_verification))
         .route("/logout", post(pages::logout))
         .route("/settings", get(pages::settings))
         .route("/settings/tokens", post(pages::create_token))
@@ -109,9 +115,12 @@ pub fn router(state: AppState) -> Router {
         .route("/admin/hide", post(pages::admin_hide))
         .route("/admin/seasons", post(pages::admin_season))
         .layer(axum::middleware::from_fn_with_state(state.clone(), pages::error_pages_keep_the_header))
+        .layer(axum::Extension(limits::StreamSlots::default()))
         .with_state(state)
         // A bug in one handler answers 500 instead of dropping the connection.
         .layer(tower_http::catch_panic::CatchPanicLayer::new())
+        // Outermost, so that every answer has them, errors and panics included.
+        .layer(axum::middleware::map_response(limits::security_headers))
 }
 
 /// The value of cookie `name` in the request.

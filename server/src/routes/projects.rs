@@ -78,6 +78,16 @@ pub async fn show(
         .into_iter()
         .filter(|r| owner || r.is_public())
         .collect();
+    // A job names its result set, which stays its owner's until published.
+    let public: std::collections::HashSet<&str> =
+        results.iter().filter(|r| r.is_public()).map(|r| r.id.as_str()).collect();
+    let jobs: Vec<Job> = jobs
+        .into_iter()
+        .map(|job| match &job.result_id {
+            Some(id) if !owner && !public.contains(id.as_str()) => job.without_result(),
+            _ => job,
+        })
+        .collect();
     let mut body = project_json(&state, &project);
     body["jobs"] = json!(jobs);
     body["results"] = json!(results);
@@ -131,13 +141,17 @@ pub async fn run_pipeline(
     Ok((status, Json(started)))
 }
 
-/// `GET /api/v1/jobs/{id}`.
+/// `GET /api/v1/jobs/{id}`: without its result set unless the caller may see it.
 pub async fn job(
     State(state): State<AppState>,
     MaybeUser(user): MaybeUser,
     Path(id): Path<String>,
 ) -> Result<Json<Job>, ApiError> {
-    Ok(Json(crate::jobs::readable(&state.pool, &id, user.as_ref()).await?.0))
+    let (job, _) = crate::jobs::readable(&state.pool, &id, user.as_ref()).await?;
+    match crate::results::private_result_of(&state.pool, &job, user.as_ref()).await? {
+        Some(_) => Ok(Json(job.without_result())),
+        None => Ok(Json(job)),
+    }
 }
 
 /// Where to continue a log.
@@ -155,52 +169,86 @@ pub async fn log(
     Query(after): Query<After>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
     let (job, _) = crate::jobs::readable(&state.pool, &id, user.as_ref()).await?;
+    let private = crate::results::private_result_of(&state.pool, &job, user.as_ref()).await?;
     let chunks = crate::jobs::log_since(&state.pool, &id, after.after).await?;
     Ok(Json(json!({
         "state": job.state,
-        "chunks": chunks.iter().map(|(seq, text)| json!({ "seq": seq, "text": text })).collect::<Vec<_>>(),
+        "chunks": chunks
+            .iter()
+            .map(|(seq, text)| json!({ "seq": seq, "text": shown(text, private.as_deref()) }))
+            .collect::<Vec<_>>(),
     })))
+}
+
+/// A log chunk as its reader may see it: without a private result set's id.
+fn shown(text: &str, private: Option<&str>) -> String {
+    match private {
+        Some(id) => crate::jobs::hide_result(text, id),
+        None => text.to_string(),
+    }
 }
 
 /// `GET /api/v1/jobs/{id}/log/stream`: the log as server-sent events
 /// (`log` events with the text, then one `end` event with the final
 /// state). It polls the database, so it works behind several server
-/// instances.
+/// instances. A stream lasts as long as its job, so each caller (a user,
+/// or an anonymous address) may hold only a few at once, and the server a
+/// bounded number ([`limits`](super::limits)): over either, 429.
 pub async fn log_stream(
     State(state): State<AppState>,
     MaybeUser(user): MaybeUser,
+    axum::Extension(slots): axum::Extension<super::limits::StreamSlots>,
+    crate::throttle::ClientIp(ip): crate::throttle::ClientIp,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     crate::jobs::readable(&state.pool, &id, user.as_ref()).await?;
-    let stream = async_stream(state, id);
+    let caller = match &user {
+        Some(user) => format!("user {}", user.id),
+        None => format!("address {ip}"),
+    };
+    let slot = slots.take(&caller)?;
+    // A running benchmark's set is stored at its end: decided then, per event.
+    let stream = async_stream(state, id, user, slot);
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()).into_response())
 }
 
 fn async_stream(
     state: AppState,
     id: String,
+    user: Option<User>,
+    slot: super::limits::StreamSlot,
 ) -> impl futures_util::Stream<Item = Result<Event, std::convert::Infallible>> {
-    futures_util::stream::unfold((state, id, 0i64, false), |(state, id, after, done)| async move {
-        if done {
-            return None;
-        }
-        loop {
-            let chunks = crate::jobs::log_since(&state.pool, &id, after).await.unwrap_or_default();
-            if let Some((seq, _)) = chunks.last() {
-                let text: String = chunks.iter().map(|(_, t)| t.as_str()).collect();
-                let event = Event::default().event("log").id(seq.to_string()).data(text);
-                return Some((Ok(event), (state, id, *seq, false)));
+    // The slot lives in the stream's state: dropped with it, however it ends.
+    futures_util::stream::unfold(
+        (state, id, user, slot, 0i64, false),
+        |(state, id, user, slot, after, done)| async move {
+            if done {
+                return None;
             }
-            let job_state = crate::jobs::get(&state.pool, &id).await.ok().flatten().map(|j| j.state);
-            match job_state {
-                Some(live) if live.is_live() => tokio::time::sleep(std::time::Duration::from_millis(300)).await,
-                other => {
-                    let event = Event::default().event("end").data(other.map_or("gone", JobState::as_str));
-                    return Some((Ok(event), (state, id, after, true)));
+            loop {
+                let chunks = crate::jobs::log_since(&state.pool, &id, after).await.unwrap_or_default();
+                let job = crate::jobs::get(&state.pool, &id).await.ok().flatten();
+                if let Some((seq, _)) = chunks.last() {
+                    let private = match &job {
+                        Some(job) => {
+                            crate::results::private_result_of(&state.pool, job, user.as_ref()).await.ok().flatten()
+                        }
+                        None => None,
+                    };
+                    let text: String = chunks.iter().map(|(_, t)| shown(t, private.as_deref())).collect();
+                    let event = Event::default().event("log").id(seq.to_string()).data(text);
+                    return Some((Ok(event), (state, id, user, slot, *seq, false)));
+                }
+                match job.map(|j| j.state) {
+                    Some(live) if live.is_live() => tokio::time::sleep(std::time::Duration::from_millis(300)).await,
+                    other => {
+                        let event = Event::default().event("end").data(other.map_or("gone", JobState::as_str));
+                        return Some((Ok(event), (state, id, user, slot, after, true)));
+                    }
                 }
             }
-        }
-    })
+        },
+    )
 }
 
 /// `POST /api/v1/jobs/{id}/cancel`: the owner or an administrator cancels a job.
@@ -309,7 +357,7 @@ pub async fn git(
         .await;
     match (served, user) {
         (crate::git::Served::Pushed(pushed), Some(user)) => {
-            let messages = handle_push(&state, &project, user, &pushed.record).await;
+            let messages = crate::pipelines::start_push(&state, &project, user, &pushed.record).await;
             pushed.respond(&messages)
         }
         (crate::git::Served::Pushed(pushed), None) => pushed.respond(&[]),
@@ -322,32 +370,4 @@ fn ask_or_hide(caller: &GitCaller, name: &str) -> Response {
         GitCaller::Anonymous => ask_credentials("log in: user name anything, password a personal access token"),
         _ => (StatusCode::NOT_FOUND, format!("no repository {name}.git that you can see\n")).into_response(),
     }
-}
-
-/// Starts the pipelines of a push that landed, one per branch moved; what
-/// each started, for the pusher.
-async fn handle_push(state: &AppState, project: &Project, user: &User, record: &crate::git::PushRecord) -> Vec<String> {
-    // The pre-receive hook has checked the options with the same rules;
-    // should the two ever disagree, the push is told, not silently built.
-    let request = match Request::from_push_options(&record.options) {
-        Ok(request) => request,
-        Err(e) => return vec![format!("FBKSD: nothing started: {}", e.message)],
-    };
-    let mut messages = Vec::new();
-    for update in
-        record.updates.iter().filter(|u| u.name.starts_with("refs/heads/") && !u.new.bytes().all(|b| b == b'0'))
-    {
-        let branch = update.name.trim_start_matches("refs/heads/");
-        match crate::pipelines::start(state, project, user, &update.new, branch, request.clone(), Source::Push).await {
-            Ok(started) => messages.push(crate::pipelines::describe(state, &started.job, branch)),
-            Err(e) => {
-                tracing::error!("pipeline for push to {}: {}", project.name, e.message);
-                messages.push(format!("FBKSD: no pipeline started for {branch}: {}", e.message));
-            }
-        }
-    }
-    if messages.is_empty() {
-        messages.push("FBKSD: no branch moved, so nothing was started (tags and deletions start no pipeline)".into());
-    }
-    messages
 }

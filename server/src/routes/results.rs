@@ -125,9 +125,6 @@ pub async fn file(
     let set = results::visible(&state.pool, &id, user.as_ref()).await?;
     results::check_file_name(&name)?;
     let path = results::files_dir(&state.config.data_dir, &set.id).join(&name);
-    let bytes = tokio::fs::read(&path)
-        .await
-        .map_err(|_| ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no file {name} in result set {id}")))?;
     let kind = match name.rsplit_once('.').map(|(_, ext)| ext) {
         Some("png") => "image/png",
         Some("exr") => "image/x-exr",
@@ -135,13 +132,25 @@ pub async fn file(
         Some("log") => "text/plain; charset=utf-8",
         _ => "application/octet-stream",
     };
-    Ok(immutable(kind, bytes))
+    immutable(kind, &path)
+        .await
+        .ok_or_else(|| ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no file {name} in result set {id}")))
 }
 
-/// A stored file: a set's files and references never change, so the browser keeps them.
-fn immutable(kind: &'static str, bytes: Vec<u8>) -> Response {
-    ([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "private, max-age=86400, immutable")], bytes)
-        .into_response()
+/// A stored file, streamed from disk (images and pixel files run to
+/// hundreds of megabytes: never whole in memory), or None if there is no
+/// such file. A set's files and references never change, so the browser
+/// keeps them.
+async fn immutable(kind: &'static str, path: &std::path::Path) -> Option<Response> {
+    let file = tokio::fs::File::open(path).await.ok()?;
+    let metadata = file.metadata().await.ok().filter(|m| m.is_file())?;
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(file, 64 << 10));
+    let headers = [
+        (header::CONTENT_TYPE, kind.to_string()),
+        (header::CONTENT_LENGTH, metadata.len().to_string()),
+        (header::CACHE_CONTROL, "private, max-age=86400, immutable".to_string()),
+    ];
+    Some((headers, body).into_response())
 }
 
 /// `GET /results/{id}/references/{scene}`: the pixel file of the reference
@@ -157,6 +166,5 @@ pub async fn reference(
     };
     let hash = results::reference_hash(&state.pool, &set.id, &scene).await?.ok_or_else(not_found)?;
     let path = results::reference_pixels(&state.config.data_dir, &hash).ok_or_else(not_found)?;
-    let bytes = tokio::fs::read(&path).await.map_err(|_| not_found())?;
-    Ok(immutable("application/octet-stream", bytes))
+    immutable("application/octet-stream", &path).await.ok_or_else(not_found)
 }

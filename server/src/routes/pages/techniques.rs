@@ -215,7 +215,15 @@ struct JobPage {
 /// `GET /jobs/{id}`: a job and its log, streamed live while it runs.
 pub async fn job_page(State(state): State<AppState>, Visitor(nav): Visitor, Path(id): Path<String>) -> PageResult {
     let (job, project) = crate::jobs::readable(&state.pool, &id, nav.user.as_ref()).await?;
-    let log: String = crate::jobs::log_since(&state.pool, &job.id, 0).await?.into_iter().map(|(_, t)| t).collect();
+    let mut log: String = crate::jobs::log_since(&state.pool, &job.id, 0).await?.into_iter().map(|(_, t)| t).collect();
+    // Others read a public project's job without its private result set.
+    let job = match crate::results::private_result_of(&state.pool, &job, nav.user.as_ref()).await? {
+        Some(private) => {
+            log = crate::jobs::hide_result(&log, &private);
+            job.without_result()
+        }
+        None => job,
+    };
     let live = job.state.is_live();
     let can_cancel = live && nav.user.as_ref().is_some_and(|u| project.writable_by(u) || u.is_admin);
     let page = JobPage {

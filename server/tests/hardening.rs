@@ -1,0 +1,312 @@
+//! What one client may take from the server or learn about others: security
+//! headers on every answer, a cap on live-log streams, result files
+//! streamed from disk, private result sets kept out of public jobs, result
+//! sets that belong to their project (not its name), and owner-only modes
+//! in the data directory.
+
+mod common;
+
+use common::{json_of, push, spawn, technique_repository, Db, FakeRunner, TestServer, TestUser};
+use reqwest::Method;
+use serde_json::{json, Value};
+use std::time::Duration;
+
+/// A benchmark of `project` (created `visibility` for `user` unless it
+/// exists) that a runner completes, with `sin-bands/4_0.png` of `image`
+/// bytes; (job id, result set id).
+async fn benchmark(
+    server: &TestServer,
+    user: &TestUser,
+    project: &str,
+    visibility: &str,
+    image: Vec<u8>,
+) -> (String, String) {
+    let (status, _) =
+        json_of(user.api(Method::GET, format!("{}/api/v1/projects/{project}", server.url)).send().await.unwrap()).await;
+    if status == 404 {
+        server.create_project(user, project, visibility).await;
+    }
+    let repo = technique_repository("box-filter-cpp");
+    let (pushed, output) = push(repo.path(), &server.clone_url(project, &user.token), &["FBKSD_RUN"]);
+    assert!(pushed, "{output}");
+    let runner = FakeRunner::register(server, "runner").await;
+    let job = runner.claim(5).await.expect("the benchmark job");
+    assert_eq!(job.body["job"]["kind"], "benchmark");
+    let upload = common::results_upload(1.0);
+    for run in upload["runs"].as_array().unwrap() {
+        let name = run["image"].as_str().unwrap();
+        let bytes = if name == "sin-bands/4_0.png" { image.clone() } else { b"\x89PNG fake".to_vec() };
+        assert_eq!(job.send(&runner, Method::PUT, &format!("files/{name}"), bytes.into()).await, 204, "{name}");
+    }
+    assert_eq!(job.send(&runner, Method::PUT, "results", upload.to_string().into()).await, 204);
+    let (status, done) = job.finish(&runner, json!({ "state": "succeeded" })).await;
+    assert_eq!(status, 200, "{done}");
+    (job.id.clone(), done["result_id"].as_str().unwrap().to_string())
+}
+
+fn assert_secure(response: &reqwest::Response, what: &str) {
+    let header = |name: &str| response.headers().get(name).and_then(|v| v.to_str().ok()).map(str::to_string);
+    let csp = header("content-security-policy").unwrap_or_else(|| panic!("{what}: no Content-Security-Policy"));
+    assert!(csp.contains("default-src 'self'") && csp.contains("img-src 'self' data: blob:"), "{what}: {csp}");
+    assert!(!csp.contains("script-src") || !csp.contains("unsafe-inline"), "{what}: inline scripts allowed: {csp}");
+    assert_eq!(header("x-frame-options").as_deref(), Some("DENY"), "{what}");
+    assert_eq!(header("x-content-type-options").as_deref(), Some("nosniff"), "{what}");
+    assert_eq!(header("referrer-policy").as_deref(), Some("same-origin"), "{what}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_answer_carries_the_security_headers() {
+    let server = spawn(Db::Sqlite).await;
+    for (path, status) in [
+        ("/", 200),
+        ("/results/", 200),
+        ("/static/log.js", 200),
+        ("/api/v1/leaderboard", 200),
+        ("/api/v1/jobs/no-such-job", 404),
+        ("/no/such/page", 404),
+    ] {
+        let response = reqwest::get(format!("{}{path}", server.url)).await.unwrap();
+        assert_eq!(response.status().as_u16(), status, "{path}");
+        assert_secure(&response, path);
+    }
+    let refused = reqwest::Client::new().post(format!("{}/api/v1/projects", server.url)).send().await.unwrap();
+    assert_eq!(refused.status(), 401);
+    assert_secure(&refused, "a refused API call");
+}
+
+/// Opens a job's live log; the answer (headers received).
+async fn stream(server: &TestServer, user: Option<&TestUser>, job: &str) -> reqwest::Response {
+    let url = format!("{}/api/v1/jobs/{job}/log/stream", server.url);
+    let request = match user {
+        Some(user) => user.api(Method::GET, url),
+        None => reqwest::Client::new().get(url),
+    };
+    tokio::time::timeout(Duration::from_secs(10), request.send()).await.expect("the stream answers").unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn live_logs_are_capped_per_user_and_a_closed_one_frees_its_place() {
+    let server = spawn(Db::Sqlite).await;
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "box-filter-cpp", "public").await;
+    let repo = technique_repository("box-filter-cpp");
+    assert!(push(repo.path(), &server.clone_url("box-filter-cpp", &ada.token), &[]).0);
+    let job = common::project_jobs(&server, &ada, "box-filter-cpp").await[0]["id"].as_str().unwrap().to_string();
+
+    let mut open = Vec::new();
+    for i in 0..8 {
+        let response = stream(&server, Some(&ada), &job).await;
+        assert_eq!(response.status(), 200, "stream {i}");
+        assert!(response.headers()["content-type"].to_str().unwrap().starts_with("text/event-stream"));
+        open.push(response);
+    }
+    let refused = stream(&server, Some(&ada), &job).await;
+    assert_eq!(refused.status(), 429);
+    let (_, body) = json_of(refused).await;
+    assert_eq!(body["error"], "too_many_streams", "{body}");
+    assert!(body["message"].as_str().unwrap().contains("close another job's page"), "{body}");
+
+    // The cap is the user's: someone else (here anonymous) still follows the log.
+    let anonymous = stream(&server, None, &job).await;
+    assert_eq!(anonymous.status(), 200);
+    drop(anonymous);
+
+    // A closed stream gives its place back (once the server notices the client left).
+    drop(open.pop());
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(40);
+    loop {
+        let again = stream(&server, Some(&ada), &job).await;
+        if again.status() == 200 {
+            open.push(again);
+            break;
+        }
+        assert_eq!(again.status(), 429);
+        assert!(tokio::time::Instant::now() < deadline, "the closed stream's place never came back");
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+    assert_eq!(stream(&server, Some(&ada), &job).await.status(), 429, "at the cap again");
+
+    // When the job ends, every stream ends with it and gives its place back.
+    let cancel = ada.api(Method::POST, format!("{}/api/v1/jobs/{job}/cancel", server.url)).send().await.unwrap();
+    assert_eq!(cancel.status(), 200);
+    for response in open {
+        let text = tokio::time::timeout(Duration::from_secs(10), response.text()).await.expect("the stream ends");
+        assert!(text.unwrap().contains("event: end\ndata: cancelled"));
+    }
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
+    while stream(&server, Some(&ada), &job).await.status() != 200 {
+        assert!(tokio::time::Instant::now() < deadline, "the ended streams' places never came back");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_large_result_file_is_streamed_whole_with_its_length() {
+    let server = spawn(Db::Sqlite).await;
+    let ada = server.user("ada@example.org").await;
+    // 24 MiB that no compression or off-by-one could pass for the original.
+    let big: Vec<u8> = (0..24u32 << 20).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+    let (_, result) = benchmark(&server, &ada, "box-filter-cpp", "private", big.clone()).await;
+
+    let url = format!("{}/results/{result}/files/sin-bands/4_0.png", server.url);
+    let response = ada.browser.get(&url).send().await.unwrap();
+    assert_eq!(response.status(), 200);
+    assert_eq!(response.headers()["content-length"].to_str().unwrap(), big.len().to_string());
+    assert_eq!(response.headers()["content-type"], "image/png");
+    assert_secure(&response, "a result file");
+    let bytes = response.bytes().await.unwrap();
+    assert!(bytes.len() == big.len() && bytes[..] == big[..], "the file arrives as it was uploaded");
+
+    // Read from disk as it is sent, not whole first: a file cut short while
+    // it is being downloaded arrives cut short (a whole read would have
+    // sent all of it). Sparse, so its 256 MiB take no disk.
+    let huge = server.config().data_dir.join("results").join(&result).join("sin-bands/huge.exr");
+    std::fs::File::create(&huge).unwrap().set_len(256 << 20).unwrap();
+    let url = format!("{}/results/{result}/files/sin-bands/huge.exr", server.url);
+    let mut response = ada.browser.get(&url).send().await.unwrap();
+    assert_eq!(response.headers()["content-length"].to_str().unwrap(), (256u64 << 20).to_string());
+    let mut received = response.chunk().await.unwrap().expect("a first chunk").len();
+    std::fs::File::options().write(true).open(&huge).unwrap().set_len(0).unwrap();
+    while let Ok(Some(chunk)) = response.chunk().await {
+        received += chunk.len();
+    }
+    assert!(received < 64 << 20, "{received} bytes arrived after the file was cut: it was read whole");
+
+    // A folder or a missing file is not found.
+    for missing in ["sin-bands", "sin-bands/nothing.png"] {
+        let response = ada.browser.get(format!("{}/results/{result}/files/{missing}", server.url)).send().await;
+        assert_eq!(response.unwrap().status(), 404, "{missing}");
+    }
+}
+
+on_both_databases!(others_read_a_public_projects_job_without_its_private_result_set, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    let bob = server.user("bob@example.org").await;
+    let (job, result) = benchmark(&server, &ada, "box-filter-cpp", "public", b"png".to_vec()).await;
+
+    // Its owner sees the link everywhere.
+    let owner_job = json_of(ada.api(Method::GET, format!("{}/api/v1/jobs/{job}", server.url)).send().await.unwrap());
+    assert_eq!(owner_job.await.1["result_id"], result.as_str());
+    assert!(common::log_text(&server, &ada, &job).await.contains(&result));
+
+    // Bob and anonymous visitors read the job, its log and its page, never the id.
+    let anonymous = reqwest::Client::new();
+    for who in ["bob", "anonymous"] {
+        let get = |path: String| match who {
+            "bob" => bob.api(Method::GET, format!("{}{path}", server.url)),
+            _ => anonymous.get(format!("{}{path}", server.url)),
+        };
+        let (status, body) = json_of(get(format!("/api/v1/jobs/{job}")).send().await.unwrap()).await;
+        assert_eq!(status, 200, "{who}: {body}");
+        assert_eq!(body["result_id"], Value::Null, "{who}: {body}");
+        assert_eq!(body["state"], "succeeded");
+        assert!(!body.to_string().contains(&result), "{who}: {body}");
+        let (status, project) = json_of(get("/api/v1/projects/box-filter-cpp".into()).send().await.unwrap()).await;
+        assert_eq!(status, 200);
+        assert!(!project.to_string().contains(&result), "{who}: {project}");
+        let log = get(format!("/api/v1/jobs/{job}/log")).send().await.unwrap().text().await.unwrap();
+        assert!(log.contains("[fbksd] private results:") && !log.contains(&result), "{who}: {log}");
+        let events = get(format!("/api/v1/jobs/{job}/log/stream")).send().await.unwrap().text().await.unwrap();
+        assert!(events.contains("event: end") && !events.contains(&result), "{who}: {events}");
+    }
+    let page = bob.browser.get(format!("{}/jobs/{job}", server.url)).send().await.unwrap().text().await.unwrap();
+    assert!(page.contains("succeeded") && !page.contains(&result), "{page}");
+    let page = reqwest::get(format!("{}/jobs/{job}", server.url)).await.unwrap().text().await.unwrap();
+    assert!(!page.contains(&result), "{page}");
+    let page = ada.browser.get(format!("{}/jobs/{job}", server.url)).send().await.unwrap().text().await.unwrap();
+    assert!(page.contains(&format!("/results/{result}")), "the owner's page links the set");
+
+    // Published, the set is everyone's: the job links it for all.
+    let published = ada.api(Method::POST, format!("{}/api/v1/results/{result}/publish", server.url)).send().await;
+    assert_eq!(published.unwrap().status(), 200);
+    let (_, body) =
+        json_of(bob.api(Method::GET, format!("{}/api/v1/jobs/{job}", server.url)).send().await.unwrap()).await;
+    assert_eq!(body["result_id"], result.as_str());
+});
+
+on_both_databases!(a_deleted_projects_name_taken_again_never_reaches_its_result_sets, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    let bob = server.user("bob@example.org").await;
+    let (_, old) = benchmark(&server, &ada, "box-filter-cpp", "public", b"png".to_vec()).await;
+    let published = ada.api(Method::POST, format!("{}/api/v1/results/{old}/publish", server.url)).send().await;
+    assert_eq!(published.unwrap().status(), 200);
+    let deleted = ada.api(Method::DELETE, format!("{}/api/v1/projects/box-filter-cpp", server.url)).send().await;
+    assert_eq!(deleted.unwrap().status(), 204);
+
+    // Bob takes the name and publishes his own set: ada's stays on the board.
+    let (_, new) = benchmark(&server, &bob, "box-filter-cpp", "public", b"png".to_vec()).await;
+    for path in [format!("/api/v1/results/{old}/publish"), format!("/api/v1/results/{old}/unpublish")] {
+        let (status, body) =
+            json_of(bob.api(Method::POST, format!("{}{path}", server.url)).send().await.unwrap()).await;
+        assert_eq!(status, 404, "{path}: {body}");
+    }
+    let (status, body) = json_of(
+        bob.api(Method::POST, format!("{}/api/v1/projects/box-filter-cpp/pipelines", server.url))
+            .json(&json!({ "variables": { "FBKSD_PUBLISH": old } }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, 404, "{body}");
+    let published = bob.api(Method::POST, format!("{}/api/v1/results/{new}/publish", server.url)).send().await;
+    assert_eq!(published.unwrap().status(), 200);
+    let (status, set) = json_of(reqwest::get(format!("{}/api/v1/results/{old}", server.url)).await.unwrap()).await;
+    assert_eq!(status, 200, "ada's set is still published: {set}");
+    assert_eq!(set["result"]["project"], Value::Null, "and belongs to no project");
+    let (_, board) = json_of(reqwest::get(format!("{}/api/v1/leaderboard", server.url)).await.unwrap()).await;
+    let mut on_board: Vec<&str> =
+        board["standings"].as_array().unwrap().iter().map(|s| s["result_id"].as_str().unwrap()).collect();
+    on_board.sort();
+    let mut both = vec![old.as_str(), new.as_str()];
+    both.sort();
+    assert_eq!(on_board, both, "{board}");
+
+    // A new season re-runs bob's technique in bob's project, and not ada's
+    // set there: its project is gone.
+    let admin = server.admin().await;
+    let (status, season) = json_of(
+        admin
+            .api(Method::POST, format!("{}/api/v1/admin/seasons", server.url))
+            .json(&json!({ "note": "new scenes" }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, 201, "{season}");
+    assert_eq!(season["queued"].as_array().unwrap().len(), 1, "{season}");
+    assert_eq!(season["skipped"][0]["why"], "its project or owner was deleted", "{season}");
+    let jobs = common::project_jobs(&server, &bob, "box-filter-cpp").await;
+    assert_eq!(jobs[0]["id"], season["queued"][0]["job"]);
+});
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_data_directory_is_the_owners_alone() {
+    use std::os::unix::fs::PermissionsExt;
+    let server = spawn(Db::Sqlite).await;
+    let ada = server.user("ada@example.org").await;
+    benchmark(&server, &ada, "box-filter-cpp", "private", b"png".to_vec()).await;
+    let data = server.config().data_dir.clone();
+    let mode = |path: &std::path::Path| std::fs::metadata(path).unwrap().permissions().mode() & 0o777;
+    let check = || {
+        assert_eq!(mode(&data), 0o700, "{}", data.display());
+        for dir in ["outbox", "results", "uploads", "git"] {
+            assert_eq!(mode(&data.join(dir)), 0o700, "{dir}");
+        }
+        assert_eq!(mode(&data.join("fbksd.sqlite3")), 0o600, "the database");
+    };
+    check();
+    assert!(std::fs::read_dir(data.join("outbox")).unwrap().count() > 0, "mail was written inside");
+    assert!(std::fs::read_dir(data.join("results")).unwrap().count() > 0, "a set was stored inside");
+
+    // A data directory left open (an older version, a careless copy) is closed at the next start.
+    for path in [data.clone(), data.join("outbox"), data.join("results")] {
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+    std::fs::set_permissions(data.join("fbksd.sqlite3"), std::fs::Permissions::from_mode(0o644)).unwrap();
+    let _again = server.another_instance().await;
+    check();
+}
