@@ -8,7 +8,9 @@
 //! publishes TECHNIQUES techniques (default 20) benchmarked on 10 scenes at
 //! 4 budgets through the real API, then runs CONNECTIONS client tasks,
 //! each on its own keep-alive connection, for SECONDS per page and prints
-//! requests per second and latency percentiles.
+//! requests per second and latency percentiles; then the same pages and a
+//! job page again while an attacker floods the log-in (wrong passwords from
+//! many addresses, as fast as 8 connections go) and 20 live job logs stream.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -162,16 +164,75 @@ async fn main() {
         ("GET /results/<uuid> (private)", format!("{}/results/{private}", server.url), Some(cookie.as_str())),
         ("GET /api/v1/leaderboard (JSON)", format!("{}/api/v1/leaderboard", server.url), None),
     ];
-    for (label, url, cookie) in pages {
-        let f = hammer(&url, cookie, connections, seconds).await;
-        println!(
-            "{label:<34} {:>9} {:>9.0} {:>9.1} {:>9.1} {:>9.1} {:>7}",
-            f.requests,
-            f.requests as f64 / f.elapsed.as_secs_f64(),
-            percentile(&f.latencies, 0.5),
-            percentile(&f.latencies, 0.99),
-            percentile(&f.latencies, 1.0),
-            f.errors
-        );
+    for (label, url, cookie) in &pages {
+        print_figures(label, &hammer(url, *cookie, connections, seconds).await);
     }
+
+    // Under attack: a running job's live log read 20 times (by three users:
+    // a user may hold 8), and a log-in flood.
+    server.create_project(&ada, "running", "public").await;
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("running", &ada.token), &["FBKSD_RUN"]).0);
+    let running = runner.claim(1).await.expect("a job to watch");
+    let mut watchers = Vec::new();
+    for u in 0..3 {
+        watchers.push(server.user(&format!("watcher-{u}@example.org")).await);
+    }
+    let mut streams = Vec::new();
+    for i in 0..20 {
+        let request = watchers[i % 3].api(Method::GET, format!("{}/api/v1/jobs/{}/log/stream", server.url, running.id));
+        let response = request.send().await.unwrap();
+        assert_eq!(response.status(), 200, "live log {i}");
+        streams.push(response);
+    }
+    let flooding = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let flood: Vec<_> = (0..8)
+        .map(|task| {
+            let (url, flooding) = (server.url.clone(), flooding.clone());
+            tokio::spawn(async move {
+                let client = reqwest::Client::new();
+                let mut answers = std::collections::BTreeMap::<u16, usize>::new();
+                let mut n = 0usize;
+                while flooding.load(std::sync::atomic::Ordering::Relaxed) {
+                    n += 1;
+                    let body =
+                        json!({ "email": format!("victim-{task}-{n}@example.org"), "password": "not the password" });
+                    if let Ok(r) = client.post(format!("{url}/api/v1/sessions")).json(&body).send().await {
+                        *answers.entry(r.status().as_u16()).or_default() += 1;
+                    }
+                }
+                answers
+            })
+        })
+        .collect();
+    println!("under a log-in flood (8 connections) and 20 live job logs:");
+    let job_page = format!("{}/jobs/{}", server.url, running.id);
+    for (label, url, cookie) in pages.iter().take(2).map(|(l, u, c)| (*l, u.as_str(), *c)).chain([(
+        "GET /jobs/<id> (job page)",
+        job_page.as_str(),
+        None,
+    )]) {
+        print_figures(label, &hammer(url, cookie, connections, seconds).await);
+    }
+    flooding.store(false, std::sync::atomic::Ordering::Relaxed);
+    let mut answers = std::collections::BTreeMap::<u16, usize>::new();
+    for task in flood {
+        for (status, n) in task.await.unwrap() {
+            *answers.entry(status).or_default() += n;
+        }
+    }
+    println!("log-in flood answers (HTTP status: count): {answers:?}");
+    drop(streams);
+}
+
+fn print_figures(label: &str, f: &Figures) {
+    println!(
+        "{label:<34} {:>9} {:>9.0} {:>9.1} {:>9.1} {:>9.1} {:>7}",
+        f.requests,
+        f.requests as f64 / f.elapsed.as_secs_f64(),
+        percentile(&f.latencies, 0.5),
+        percentile(&f.latencies, 0.99),
+        percentile(&f.latencies, 1.0),
+        f.errors
+    );
 }

@@ -66,7 +66,9 @@ impl PushRecord {
     fn parse(text: &str) -> PushRecord {
         let mut record = PushRecord::default();
         for line in text.lines() {
-            if let Some(rest) = line.strip_prefix("ref ") {
+            // Options come after every ref: a "ref" line among them is part
+            // of an option value (the pre-receive hook refuses those anyway).
+            if let (Some(rest), true) = (line.strip_prefix("ref "), record.options.is_empty()) {
                 let mut parts = rest.splitn(3, ' ');
                 if let (Some(old), Some(new), Some(name)) = (parts.next(), parts.next(), parts.next()) {
                     record.updates.push(RefUpdate { old: old.into(), new: new.into(), name: name.into() });
@@ -168,6 +170,35 @@ pub struct GitHost {
     root: PathBuf,
     hooks: PathBuf,
     max_push_bytes: u64,
+    processes: std::sync::Arc<tokio::sync::Semaphore>,
+}
+
+/// At most this many git processes run at once (pushes, fetches, reads):
+/// each holds memory and a core, and a flood of pushes or page views must
+/// queue, not fork without bound.
+const MAX_GIT_PROCESSES: usize = 16;
+
+/// How long one git read may take.
+const GIT_TIME_LIMIT: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// Output bytes allowed per file of `ls-tree -r -l -z`: mode, type, a
+/// 40-digit id, a size and a path of up to 4096 bytes.
+const LS_TREE_LINE_BYTES: usize = 4200;
+
+/// How much of a git command's output is read before it is stopped.
+#[derive(Debug, Clone, Copy)]
+struct Limit {
+    /// Bytes.
+    bytes: usize,
+    /// NUL-ended records (`-z` output).
+    records: usize,
+}
+
+impl Limit {
+    /// For commands that answer a line.
+    fn small() -> Limit {
+        Limit { bytes: 64 << 10, records: usize::MAX }
+    }
 }
 
 /// A git command that failed; the message includes its stderr.
@@ -176,6 +207,56 @@ pub struct GitHost {
 pub struct GitError {
     command: String,
     message: String,
+    /// Why, for callers that answer differently to a repository that is
+    /// too big than to git failing.
+    pub kind: GitErrorKind,
+}
+
+/// Why a git command failed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GitErrorKind {
+    /// git failed or could not run.
+    Failed,
+    /// Its output passed the caller's cap (git was killed).
+    TooLarge,
+    /// It did not finish within [`GIT_TIME_LIMIT`].
+    TimedOut,
+}
+
+/// One file of a commit, as `git ls-tree -r -l` lists it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TreeFile {
+    /// Path from the repository's root.
+    pub path: String,
+    /// Git's mode: `100644`, `100755`, `120000` (a symbolic link), `160000` (a submodule).
+    pub mode: String,
+    /// `blob` or `commit` (a submodule).
+    pub kind: String,
+    /// The object id.
+    pub id: String,
+    /// Size in bytes (0 for a submodule).
+    pub size: u64,
+}
+
+impl TreeFile {
+    fn parse(line: &[u8]) -> Option<TreeFile> {
+        let line = String::from_utf8_lossy(line);
+        let (meta, path) = line.split_once('\t')?;
+        let mut fields = meta.split_whitespace();
+        let (mode, kind, id, size) = (fields.next()?, fields.next()?, fields.next()?, fields.next()?);
+        Some(TreeFile {
+            path: path.to_string(),
+            mode: mode.into(),
+            kind: kind.into(),
+            id: id.into(),
+            size: size.parse().unwrap_or(0),
+        })
+    }
+
+    /// Whether git stores it as a symbolic link.
+    pub fn is_symlink(&self) -> bool {
+        self.mode == "120000"
+    }
 }
 
 impl GitHost {
@@ -203,20 +284,33 @@ impl GitHost {
         for entry in std::fs::read_dir(&root)? {
             let repository = entry?.path();
             let config = std::fs::read_to_string(repository.join("config")).unwrap_or_default();
-            let pointed = config.lines().any(|l| l.trim() == format!("hooksPath = {}", hooks.display()));
-            if repository.extension().is_some_and(|e| e == "git") && !pointed {
+            if repository.extension().is_none_or(|e| e != "git") {
+                continue;
+            }
+            let hooks_path = format!("hooksPath = {}", hooks.display());
+            for (key, value, line) in [
+                ("core.hooksPath", hooks.to_string_lossy(), hooks_path.as_str()),
+                ("uploadpack.allowFilter", "true".into(), "allowfilter = true"),
+            ] {
+                if config.lines().any(|l| l.trim().eq_ignore_ascii_case(line)) {
+                    continue;
+                }
                 let set = std::process::Command::new("git")
                     .arg("-C")
                     .arg(&repository)
-                    .args(["config", "core.hooksPath"])
-                    .arg(&hooks)
+                    .args(["config", key, value.as_ref()])
                     .status()?;
                 if !set.success() {
-                    tracing::warn!("{}: cannot set core.hooksPath", repository.display());
+                    tracing::warn!("{}: cannot set {key}", repository.display());
                 }
             }
         }
-        Ok(GitHost { root, hooks, max_push_bytes })
+        Ok(GitHost {
+            root,
+            hooks,
+            max_push_bytes,
+            processes: std::sync::Arc::new(tokio::sync::Semaphore::new(MAX_GIT_PROCESSES)),
+        })
     }
 
     /// The largest push accepted, in bytes.
@@ -228,31 +322,84 @@ impl GitHost {
         self.root.join(format!("{project_id}.git"))
     }
 
-    async fn git(&self, args: &[&str], dir: Option<&Path>) -> Result<Vec<u8>, GitError> {
+    /// Runs git with at most [`MAX_GIT_PROCESSES`] at once, reading at most
+    /// `limit` of its output within [`GIT_TIME_LIMIT`]. Output is
+    /// streamed and git is killed at the cap: a repository's content decides
+    /// how much `ls-tree -r` or `cat-file` would print (a few KB of nested
+    /// trees name ~10¹⁰ paths), so nothing of it is read unbounded.
+    async fn git(&self, args: &[&str], dir: Option<&Path>, limit: Limit) -> Result<Vec<u8>, GitError> {
+        let error = |message: String| GitError { command: args.join(" "), message, kind: GitErrorKind::Failed };
+        let _permit = self.processes.acquire().await.map_err(|e| error(e.to_string()))?;
         let mut command = Command::new("git");
         if let Some(dir) = dir {
             command.arg("-C").arg(dir);
         }
-        let output = command
+        let mut child = command
             .args(args)
             .stdin(Stdio::null())
-            .output()
-            .await
-            .map_err(|e| GitError { command: args.join(" "), message: format!("cannot run git: {e}") })?;
-        if !output.status.success() {
-            return Err(GitError {
-                command: args.join(" "),
-                message: String::from_utf8_lossy(&output.stderr).trim().to_string(),
-            });
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .kill_on_drop(true)
+            .spawn()
+            .map_err(|e| error(format!("cannot run git: {e}")))?;
+        let (Some(stdout), Some(stderr)) = (child.stdout.take(), child.stderr.take()) else {
+            return Err(error("git has no pipes".into()));
+        };
+        let stderr = tokio::spawn(async move {
+            let mut text = Vec::new();
+            let _ = stderr.take(64 << 10).read_to_end(&mut text).await;
+            String::from_utf8_lossy(&text).trim().to_string()
+        });
+        let mut output = Vec::new();
+        let too_large = GitError {
+            command: args.join(" "),
+            message: format!("its output is larger than {} bytes or {} records", limit.bytes, limit.records),
+            kind: GitErrorKind::TooLarge,
+        };
+        // Read in chunks, counting NUL-ended records as they come: `ls-tree
+        // -r -z` is stopped at its first record past the cap, not after
+        // megabytes of paths.
+        let read = async {
+            let (mut stdout, mut chunk, mut records) = (stdout, vec![0u8; 64 << 10], 0usize);
+            loop {
+                let n = stdout.read(&mut chunk).await?;
+                if n == 0 {
+                    return Ok::<bool, std::io::Error>(true);
+                }
+                records += chunk[..n].iter().filter(|b| **b == 0).count();
+                if output.len() + n > limit.bytes || records > limit.records {
+                    return Ok(false);
+                }
+                output.extend_from_slice(&chunk[..n]);
+            }
+        };
+        match tokio::time::timeout(GIT_TIME_LIMIT, read).await {
+            Err(_) => {
+                return Err(GitError {
+                    command: args.join(" "),
+                    message: format!("did not finish within {} s", GIT_TIME_LIMIT.as_secs()),
+                    kind: GitErrorKind::TimedOut,
+                })
+            }
+            Ok(Err(e)) => return Err(error(format!("reading its output: {e}"))),
+            Ok(Ok(false)) => return Err(too_large),
+            Ok(Ok(true)) => {}
         }
-        Ok(output.stdout)
+        let status = tokio::time::timeout(GIT_TIME_LIMIT, child.wait())
+            .await
+            .map_err(|_| error("did not exit".into()))?
+            .map_err(|e| error(e.to_string()))?;
+        if !status.success() {
+            return Err(error(stderr.await.unwrap_or_default()));
+        }
+        Ok(output)
     }
 
     /// Creates the bare repository of a new project.
     pub async fn create(&self, project_id: &str) -> Result<(), GitError> {
         let path = self.repository(project_id);
         let path_text = path.to_string_lossy().into_owned();
-        self.git(&["init", "--quiet", "--bare", "--initial-branch=main", &path_text], None).await?;
+        self.git(&["init", "--quiet", "--bare", "--initial-branch=main", &path_text], None, Limit::small()).await?;
         let max = self.max_push_bytes.to_string();
         let hooks = self.hooks.to_string_lossy().into_owned();
         for (key, value) in [
@@ -260,9 +407,11 @@ impl GitHost {
             ("receive.advertisePushOptions", "true"),
             ("receive.maxInputSize", max.as_str()),
             ("receive.fsckObjects", "true"),
+            // Runners clone with `--filter=blob:none`: only the pinned commit's files.
+            ("uploadpack.allowFilter", "true"),
             ("core.hooksPath", hooks.as_str()),
         ] {
-            self.git(&["config", key, value], Some(&path)).await?;
+            self.git(&["config", key, value], Some(&path), Limit::small()).await?;
         }
         Ok(())
     }
@@ -281,24 +430,62 @@ impl GitHost {
             return None;
         }
         let spec = format!("{rev}^{{commit}}");
-        let out = self.git(&["rev-parse", "--verify", "--quiet", &spec], Some(&self.repository(project_id))).await;
+        let out = self
+            .git(&["rev-parse", "--verify", "--quiet", &spec], Some(&self.repository(project_id)), Limit::small())
+            .await;
         out.ok().map(|o| String::from_utf8_lossy(&o).trim().to_string())
     }
 
-    /// Every file path at `commit`.
-    pub async fn files(&self, project_id: &str, commit: &str) -> Result<Vec<String>, GitError> {
-        let out = self.git(&["ls-tree", "-r", "--name-only", "-z", commit], Some(&self.repository(project_id))).await?;
-        Ok(out.split(|b| *b == 0).filter(|p| !p.is_empty()).map(|p| String::from_utf8_lossy(p).into_owned()).collect())
+    /// Every file at `commit`, if there are at most `max_files`.
+    pub async fn files(&self, project_id: &str, commit: &str, max_files: usize) -> Result<Vec<TreeFile>, GitError> {
+        // `-l` adds each blob's size; a line is mode, type, id, size, then the path.
+        let args = ["ls-tree", "-r", "-l", "--full-tree", "-z", commit];
+        let limit = Limit { bytes: max_files * LS_TREE_LINE_BYTES, records: max_files };
+        let out = match self.git(&args, Some(&self.repository(project_id)), limit).await {
+            Err(GitError { kind: GitErrorKind::TooLarge, command, .. }) => {
+                return Err(GitError {
+                    command,
+                    message: format!("the commit holds more than {max_files} files"),
+                    kind: GitErrorKind::TooLarge,
+                })
+            }
+            other => other?,
+        };
+        let entries: Vec<TreeFile> =
+            out.split(|b| *b == 0).filter(|l| !l.is_empty()).filter_map(TreeFile::parse).collect();
+        if entries.len() > max_files {
+            return Err(GitError {
+                command: args.join(" "),
+                message: format!("the commit holds {} files, more than {max_files}", entries.len()),
+                kind: GitErrorKind::TooLarge,
+            });
+        }
+        Ok(entries)
     }
 
-    /// The text of `path` at `commit` (at most `max` bytes), if the file exists.
-    pub async fn read(&self, project_id: &str, commit: &str, path: &str, max: usize) -> Result<Option<String>, String> {
-        let spec = format!("{commit}:{path}");
-        match self.git(&["cat-file", "blob", &spec], Some(&self.repository(project_id))).await {
-            Ok(bytes) if bytes.len() > max => Err(format!("{path} is larger than {max} bytes")),
-            Ok(bytes) => String::from_utf8(bytes).map(Some).map_err(|_| format!("{path} is not UTF-8 text")),
-            Err(_) => Ok(None),
+    /// The text of `file` (an entry of [`GitHost::files`]), at most `max`
+    /// bytes: its size is checked before a byte of it is read, and a
+    /// symbolic link is refused (its blob is the link's target, which the
+    /// runner's checkout would resolve to something else).
+    pub async fn read(&self, project_id: &str, file: &TreeFile, max: usize) -> Result<String, String> {
+        if file.is_symlink() {
+            return Err(format!("{} is a symbolic link: commit the file itself", file.path));
         }
+        if file.kind != "blob" {
+            return Err(format!("{} is not a file", file.path));
+        }
+        if file.size > max as u64 {
+            return Err(format!("{} is {} bytes, larger than {max} bytes", file.path, file.size));
+        }
+        let bytes = self
+            .git(
+                &["cat-file", "blob", &file.id],
+                Some(&self.repository(project_id)),
+                Limit { bytes: max, records: usize::MAX },
+            )
+            .await
+            .map_err(|e| format!("{}: {e}", file.path))?;
+        String::from_utf8(bytes).map_err(|_| format!("{} is not UTF-8 text", file.path))
     }
 
     /// Answers one smart-HTTP request for a project's repository with
@@ -348,6 +535,10 @@ impl GitHost {
         if let Some(record) = &record {
             command.env("FBKSD_PUSH_RECORD", record.path());
         }
+        // Held until git ends: for a fetch, by the task that waits for it.
+        let Ok(permit) = self.processes.clone().acquire_owned().await else {
+            return plain(StatusCode::SERVICE_UNAVAILABLE, "the server is shutting down\n".into());
+        };
         let mut child = match command.spawn() {
             Ok(c) => c,
             Err(e) => return plain(StatusCode::INTERNAL_SERVER_ERROR, format!("cannot run git http-backend: {e}\n")),
@@ -361,10 +552,13 @@ impl GitHost {
             // git may answer before reading everything (a refused pack): ignore EPIPE.
             let _ = stdin.write_all(&body).await;
         });
+        // Read to the end (git would block on a full pipe), keep the start.
         let stderr_task = tokio::spawn(async move {
-            let mut text = String::new();
-            let _ = stderr.read_to_string(&mut text).await;
-            text
+            let (mut kept, mut chunk) = (Vec::new(), [0u8; 8192]);
+            while let Ok(n @ 1..) = stderr.read(&mut chunk).await {
+                kept.extend_from_slice(&chunk[..n.min((64usize << 10).saturating_sub(kept.len()))]);
+            }
+            String::from_utf8_lossy(&kept).into_owned()
         });
 
         // CGI headers, then the body.
@@ -399,6 +593,7 @@ impl GitHost {
             }
             // Fetches stream: a clone can be large.
             tokio::spawn(async move {
+                let _permit = permit;
                 let _ = child.wait().await;
                 let errors = stderr_task.await.unwrap_or_default();
                 if !errors.trim().is_empty() {
@@ -412,9 +607,11 @@ impl GitHost {
         }
 
         // Pushes answer little; wait for the hooks to finish so the record is complete.
+        // Its report-status is a few lines per ref; the cap only guards memory.
         let mut output = Vec::new();
-        let _ = reader.read_to_end(&mut output).await;
+        let _ = (&mut reader).take(16 << 20).read_to_end(&mut output).await;
         let exit = child.wait().await;
+        drop(permit);
         let errors = stderr_task.await.unwrap_or_default();
         if !errors.trim().is_empty() {
             tracing::debug!("git http-backend (push): {}", errors.trim());

@@ -54,9 +54,15 @@ pub fn pre_receive_hook() -> String {
 # as the server's pipeline variables; written by fbksd-server at start).
 i=0
 requests=0
+# A value with a line break would add lines to the server's push record.
+newline='
+'
 while [ "$i" -lt "${{GIT_PUSH_OPTION_COUNT:-0}}" ]; do
     eval "option=\$GIT_PUSH_OPTION_$i"
     case "$option" in
+        *"$newline"*|*"$(printf '\r')"*)
+            echo "FBKSD: a push option holds a line break: give each option on its own -o"
+            exit 1 ;;
         FBKSD_RUN|FBKSD_RUN=*) requests=$((requests + 1)) ;;
         FBKSD_PUBLISH=*)
             requests=$((requests + 1))
@@ -163,15 +169,44 @@ pub struct Started {
     pub job: crate::jobs::Job,
 }
 
+/// The most files a technique's commit may hold: `ls-tree` is read only
+/// this far, so a "git bomb" (nested trees naming ~10¹⁰ paths in a few KB)
+/// is refused in a second instead of filling the server's memory.
+pub const MAX_FILES: usize = 20_000;
+
+/// The most bytes a checkout of a technique's commit may hold (the sum of
+/// its files' sizes): what a runner's clone writes to its disk.
+pub const MAX_CHECKOUT_BYTES: u64 = 512 << 20;
+
+/// The largest info.json read.
+const MAX_INFO_BYTES: usize = 64 * 1024;
+
 /// Checks the repository at `commit`: its parsed info.json, or what is wrong.
+/// Sizes are checked before anything is read, so a repository built to be
+/// big costs the server no more than a small one.
 pub async fn sanity_check(state: &AppState, project: &Project, commit: &str) -> Result<TechniqueInfo, String> {
-    let files = state.git.files(&project.id, commit).await.map_err(|e| e.to_string())?;
-    let text = state
-        .git
-        .read(&project.id, commit, "info.json", 64 * 1024)
-        .await?
+    let files = state.git.files(&project.id, commit, MAX_FILES).await.map_err(|e| match e.kind {
+        crate::git::GitErrorKind::TooLarge => format!(
+            "the commit holds more than {MAX_FILES} files: a technique's repository must stay below that \
+             (keep data sets and build outputs out of it)"
+        ),
+        _ => e.to_string(),
+    })?;
+    let total: u64 = files.iter().map(|f| f.size).sum();
+    if total > MAX_CHECKOUT_BYTES {
+        return Err(format!(
+            "the commit's files add up to {} MiB, more than the {} MiB a checkout may hold",
+            total >> 20,
+            MAX_CHECKOUT_BYTES >> 20
+        ));
+    }
+    let info = files
+        .iter()
+        .find(|f| f.path == "info.json")
         .ok_or("the repository has no info.json at its root: see the SDK's example techniques")?;
-    TechniqueInfo::parse(&text, &files)
+    let text = state.git.read(&project.id, info, MAX_INFO_BYTES).await?;
+    let paths: Vec<String> = files.into_iter().map(|f| f.path).collect();
+    TechniqueInfo::parse(&text, &paths)
 }
 
 /// Starts a pipeline at `commit` for `user` (the project's owner).
@@ -223,12 +258,13 @@ pub async fn start(
             }
         }
     }
-    if request == Request::Run && failure.is_none() && source != Source::Season {
-        if let Err(e) = check_quota(state, &user.id).await {
+    if kind != JobKind::Publish && failure.is_none() && source != Source::Season {
+        if let Err(e) = check_quota(state, &user.id, kind).await {
             if source == Source::Api {
                 return Err(e);
             }
-            cancelled = Some(format!("not run: {}", e.message));
+            let not = if kind == JobKind::Build { "not built" } else { "not run" };
+            cancelled = Some(format!("{not}: {}", e.message));
         }
     }
 
@@ -272,8 +308,8 @@ pub async fn start(
         max_attempts: state.config.max_attempts as i64,
         season,
         publish_on_success: source == Source::Season,
-        // Only runs that were queued use up the day's runs.
-        counts_for_quota: kind == JobKind::Benchmark && job_state == JobState::Queued && source != Source::Season,
+        // Only jobs that were queued use up the day's runs or builds.
+        counts_for_quota: kind != JobKind::Publish && job_state == JobState::Queued && source != Source::Season,
         finished_at: finished,
     };
     crate::jobs::insert(&mut tx, &new_job).await?;
@@ -292,6 +328,53 @@ pub async fn start(
     Ok(Started { pipeline_id, job })
 }
 
+/// The most branches one push starts pipelines for: a push of 10 000
+/// branches queues a handful of builds, and the pusher is told why.
+pub const MAX_BRANCHES_PER_PUSH: usize = 5;
+
+/// Starts the pipelines of a push that landed, one per branch moved (at
+/// most [`MAX_BRANCHES_PER_PUSH`]); what each started, for the pusher.
+pub async fn start_push(
+    state: &AppState,
+    project: &Project,
+    user: &User,
+    record: &crate::git::PushRecord,
+) -> Vec<String> {
+    // The pre-receive hook has checked the options with the same rules;
+    // should the two ever disagree, the push is told, not silently built.
+    let request = match Request::from_push_options(&record.options) {
+        Ok(request) => request,
+        Err(e) => return vec![format!("FBKSD: nothing started: {}", e.message)],
+    };
+    let branches: Vec<_> = record
+        .updates
+        .iter()
+        .filter(|u| u.name.starts_with("refs/heads/") && !u.new.bytes().all(|b| b == b'0'))
+        .collect();
+    let mut messages = Vec::new();
+    for update in branches.iter().take(MAX_BRANCHES_PER_PUSH) {
+        let branch = update.name.trim_start_matches("refs/heads/");
+        match start(state, project, user, &update.new, branch, request.clone(), Source::Push).await {
+            Ok(started) => messages.push(describe(state, &started.job, branch)),
+            Err(e) => {
+                tracing::error!("pipeline for push to {}: {}", project.name, e.message);
+                messages.push(format!("FBKSD: no pipeline started for {branch}: {}", e.message));
+            }
+        }
+    }
+    if branches.len() > MAX_BRANCHES_PER_PUSH {
+        messages.push(format!(
+            "FBKSD: {} more branches moved, but a push starts at most {MAX_BRANCHES_PER_PUSH} pipelines: \
+             push them separately, or start them from the project's page",
+            branches.len() - MAX_BRANCHES_PER_PUSH
+        ));
+    }
+    if messages.is_empty() {
+        messages.push("FBKSD: no branch moved, so nothing was started (tags and deletions start no pipeline)".into());
+    }
+    messages
+}
+
 /// What a push started, in a line or two for its `remote:` output.
 pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> String {
     let url = format!("{}/jobs/{}", state.public_url, job.id);
@@ -308,8 +391,16 @@ pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> Strin
     }
 }
 
-/// Refuses a run over the user's quotas.
-async fn check_quota(state: &AppState, user_id: &str) -> Result<(), ServiceError> {
+/// Builds allowed per user and day: a build is much cheaper than a run, so
+/// a multiple of the run quota (a setting would be one more knob to get
+/// wrong; this keeps the two in proportion).
+pub fn builds_per_day(config: &crate::config::Config) -> u64 {
+    config.max_runs_per_day.saturating_mul(5)
+}
+
+/// Refuses a job of `kind` (a run, or a build: both take a runner) over the
+/// user's quotas: the queued jobs, then that kind's daily number.
+async fn check_quota(state: &AppState, user_id: &str, kind: JobKind) -> Result<(), ServiceError> {
     if crate::accounts::is_service(&state.pool, user_id).await? {
         return Ok(());
     }
@@ -323,14 +414,16 @@ async fn check_quota(state: &AppState, user_id: &str) -> Result<(), ServiceError
             ),
         ));
     }
-    let today = crate::jobs::runs_today(&state.pool, user_id).await?;
-    if today >= state.config.max_runs_per_day as i64 {
+    let (limit, code, what) = match kind {
+        JobKind::Build => (builds_per_day(&state.config), "quota_builds", "builds"),
+        _ => (state.config.max_runs_per_day, "quota_runs", "benchmark runs"),
+    };
+    if crate::jobs::counted_today(&state.pool, user_id, kind).await? >= limit as i64 {
         return Err(ServiceError::too_many(
-            "quota_runs",
+            code,
             format!(
-                "you have used your {} benchmark runs of the last 24 hours; runs that failed for infrastructure \
-                 reasons or were cancelled before starting do not count",
-                state.config.max_runs_per_day
+                "you have used your {limit} {what} of the last 24 hours; {what} that failed for infrastructure \
+                 reasons or were cancelled before starting do not count"
             ),
         ));
     }
@@ -394,6 +487,7 @@ pub async fn finish(
         (JobState::Failed, Some(FailureReason::InfrastructureError)) if job.attempts < job.max_attempts => {
             // Not the user's fault: another runner tries again.
             crate::jobs::queue_again(&state.pool, job_id).await?;
+            discard_attempt(state, job_id).await?;
             let note = format!("[fbksd] infrastructure error: {}; the job is queued again\n", outcome.message);
             crate::jobs::append_log(&state.pool, job_id, attempt, &note, i64::MAX).await?;
             state.job_queued.notify_waiters();
@@ -402,6 +496,7 @@ pub async fn finish(
         (JobState::Failed, Some(reason)) => {
             let counts = reason != FailureReason::InfrastructureError;
             crate::jobs::end(&state.pool, job_id, JobState::Failed, Some(reason), &outcome.message, counts).await?;
+            discard_attempt(state, job_id).await?;
             if let (Some(owner), Some(job)) = (owner, crate::jobs::get(&state.pool, job_id).await?) {
                 mail_failure(state, &owner, &job).await;
             }
@@ -409,14 +504,19 @@ pub async fn finish(
         }
         (JobState::Failed, None) => Err(ServiceError::invalid(
             "missing_reason",
-            "a failed job needs a reason: build_failed, timeout, out_of_memory, crashed, invalid_output or infrastructure_error",
+            "a failed job needs a reason: build_failed, timeout, out_of_memory, crashed, invalid_output, over_limit or infrastructure_error",
         )),
         (other, _) => Err(ServiceError::invalid("invalid_state", format!("state {other}: use succeeded or failed"))),
     }
 }
 
 /// Turns a benchmark job's staged upload into a result set, in one
-/// transaction with the job's end; then moves its files into place.
+/// transaction with the job's end.
+///
+/// Idempotent, so a server killed at any step loses nothing when the
+/// runner reports the end again: the set's id is chosen once and kept on
+/// the job; the files move under it (a retry finds them there); the shared
+/// references are kept; then the set and the job's end commit together.
 async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<String, ServiceError> {
     let (staged, publish) = crate::jobs::staged_results(&state.pool, &job.id).await?;
     let staged = staged.ok_or_else(|| {
@@ -435,11 +535,25 @@ async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<Strin
         Ok(info) => serde_json::to_value(&info).map_err(ServiceError::internal)?,
         Err(problem) => return Err(ServiceError::conflict("invalid_repository", problem)),
     };
-    let staging = crate::results::staging_dir(&state.config.data_dir, &job.id);
+    let data = &state.config.data_dir;
+    let id = crate::jobs::pending_result_id(&state.pool, &job.id).await?;
+    let (staging, target) = (crate::results::staging_dir(data, &job.id), crate::results::files_dir(data, &id));
+    if tokio::fs::try_exists(&staging).await.unwrap_or(false) {
+        if let Some(parent) = target.parent() {
+            tokio::fs::create_dir_all(parent).await.map_err(ServiceError::internal)?;
+        }
+        // Files of an earlier try of this same attempt: the staged ones are newer.
+        let _ = tokio::fs::remove_dir_all(&target).await;
+        tokio::fs::rename(&staging, &target).await.map_err(ServiceError::internal)?;
+    }
+    crash_point("moved");
+    crate::results::keep_references(data, &target, &upload).await;
+    crash_point("references-kept");
     let mut tx = state.pool.begin().await?;
-    let id = crate::results::insert(
+    crate::results::insert(
         &mut tx,
         &crate::results::NewResultSet {
+            id: &id,
             job_id: &job.id,
             project_id: &job.project_id,
             user_id: &job.user_id,
@@ -455,18 +569,47 @@ async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<Strin
     if !crate::jobs::succeed_with_results(&mut tx, &job.id, &id).await? {
         return Err(ServiceError::gone("job_not_running", "the job is no longer running"));
     }
-    // Files first, then the commit: a failure leaves no result set without its files.
-    let target = crate::results::files_dir(&state.config.data_dir, &id);
-    if staging.exists() {
-        if let Some(parent) = target.parent() {
-            tokio::fs::create_dir_all(parent).await.map_err(ServiceError::internal)?;
-        }
-        tokio::fs::rename(&staging, &target).await.map_err(ServiceError::internal)?;
-    }
-    if let Err(e) = tx.commit().await {
-        let _ = tokio::fs::rename(&target, &staging).await;
-        return Err(e.into());
-    }
-    crate::results::keep_references(&state.config.data_dir, &target, &upload).await;
+    tx.commit().await?;
+    crash_point("committed");
     Ok(id)
+}
+
+/// Ends the process at once when `FBKSD_CRASH_AT` names `step`: the
+/// crash tests kill the server between the steps of storing a result set
+/// (as a power cut would) and check that the retry loses nothing.
+fn crash_point(step: &str) {
+    if std::env::var("FBKSD_CRASH_AT").is_ok_and(|s| s == step) {
+        eprintln!("FBKSD_CRASH_AT={step}: ending the server here");
+        std::process::abort();
+    }
+}
+
+/// Drops what an attempt of a job staged or moved (its uploads, and the
+/// files of a set it did not commit): called when an attempt starts, so
+/// stale files never satisfy a later check, and when a job ends without a
+/// set.
+pub async fn discard_attempt(state: &AppState, job_id: &str) -> Result<(), ServiceError> {
+    let data = &state.config.data_dir;
+    let _ = tokio::fs::remove_dir_all(crate::results::staging_dir(data, job_id)).await;
+    if let Some(pending) = crate::jobs::take_pending_result_id(&state.pool, job_id).await? {
+        let _ = tokio::fs::remove_dir_all(crate::results::files_dir(data, &pending)).await;
+    }
+    Ok(())
+}
+
+/// Removes the uploads of every job that is not running (failed,
+/// cancelled, requeued, deleted), and the files of sets they did not
+/// commit: what a crash or an ended job left. Run at start and now and then.
+pub async fn sweep_uploads(state: &AppState) -> Result<usize, ServiceError> {
+    let uploads = state.config.data_dir.join("uploads");
+    let Ok(mut entries) = tokio::fs::read_dir(&uploads).await else { return Ok(0) };
+    let mut ids = Vec::new();
+    while let Ok(Some(entry)) = entries.next_entry().await {
+        ids.push(entry.file_name().to_string_lossy().into_owned());
+    }
+    let stale = crate::jobs::not_running(&state.pool, &ids).await?;
+    for id in &stale {
+        discard_attempt(state, id).await?;
+    }
+    Ok(stale.len())
 }

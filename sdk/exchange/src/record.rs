@@ -66,6 +66,9 @@ pub enum FailureReason {
     Crashed,
     /// The technique's output was wrong (size, NaN, layout, budget, protocol).
     InvalidOutput,
+    /// The job wrote more than its limits allow (build directory, clone,
+    /// output, upload): the author's, counted like any failure.
+    OverLimit,
     /// Not the author's fault: the runner, Docker or the server failed.
     InfrastructureError,
 }
@@ -79,6 +82,7 @@ impl FailureReason {
             FailureReason::OutOfMemory => "out_of_memory",
             FailureReason::Crashed => "crashed",
             FailureReason::InvalidOutput => "invalid_output",
+            FailureReason::OverLimit => "over_limit",
             FailureReason::InfrastructureError => "infrastructure_error",
         }
     }

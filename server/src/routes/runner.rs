@@ -56,6 +56,8 @@ pub async fn claim(
         let notified = state.job_queued.notified();
         if let Some(claimed) = crate::jobs::claim(&state.pool, state.postgres, &runner_id, lease_ms).await? {
             let job = claimed.job;
+            // A new attempt starts clean: an earlier one's files never count for it.
+            crate::pipelines::discard_attempt(&state, &job.id).await?;
             return Ok(Json(Claim {
                 repository: state.clone_url(&job.project),
                 commit: job.commit_sha,
@@ -97,7 +99,10 @@ pub async fn append_log(State(state): State<AppState>, job: JobCaller, body: Byt
         Err(ApiError::new(
             StatusCode::PAYLOAD_TOO_LARGE,
             "log_too_large",
-            format!("the job's log would pass {} bytes; the rest is dropped", state.config.max_log_bytes),
+            format!(
+                "the job's log reached its limit of {} bytes: it was kept up to there, send no more",
+                state.config.max_log_bytes
+            ),
         ))
     }
 }
