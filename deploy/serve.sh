@@ -13,6 +13,8 @@
 #
 # Options, as environment variables:
 #   FBKSD_DATA_DIR   the data directory (default fbksd-data, relative to the repository)
+#   FBKSD_RUNNER_DIR the runner's work directory (default fbksd-runner): apart from the
+#                    server's data, so a job filling it cannot fill the server's disk quota
 #   FBKSD_PROFILE    release (default), or debug: the binaries of `cargo build --workspace`, as they are (CI)
 #   FBKSD_SERVER_*   the server's settings, e.g. FBKSD_SERVER_BIND=127.0.0.1:9000
 #   FBKSD_CI_*       the runner's flags, e.g. FBKSD_CI_SCENES=experimental/sphere FBKSD_CI_SPP=1,4
@@ -24,6 +26,9 @@ data=${FBKSD_DATA_DIR:-fbksd-data}
 mkdir -p "$data"
 # Absolute, for everything started below (the server resolves it too).
 data=$(cd "$data" && pwd)
+runner_dir=${FBKSD_RUNNER_DIR:-fbksd-runner}
+mkdir -p "$runner_dir"
+runner_dir=$(cd "$runner_dir" && pwd)
 
 case "${FBKSD_PROFILE:-release}" in
     release) build() { cargo build --release --locked "$@"; }; bin=target/release ;;
@@ -89,7 +94,8 @@ bash deploy/build-images.sh --bin-dir "$bin" --manifest "$data/images.json"
 : "${FBKSD_CI_SCENES:=experimental/black-ring,experimental/defocus-checkerboard,experimental/fireflies,experimental/mandelbrot,experimental/moving-bars,experimental/sin-bands,experimental/sphere,production-small/cornell-box}"
 export FBKSD_CI_SCENES
 export FBKSD_CI_SCENE_ROOT=${FBKSD_CI_SCENE_ROOT:-$(pwd)/scenes}
-"$bin/fbksd-ci" --server "http://$bind" --registration-token "$token" --work-dir "$data/ci" \
+# The token through the environment: a command line is readable by every user of the machine.
+FBKSD_REGISTRATION_TOKEN="$token" "$bin/fbksd-ci" --server "http://$bind" --work-dir "$runner_dir" \
     --images "$data/images.json" &
 runner=$!
 echo "serve: runner started; it makes the references its scenes lack before it takes jobs (see the home page)" >&2

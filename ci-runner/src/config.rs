@@ -65,6 +65,22 @@ pub struct RunnerConfig {
     #[arg(long, env = "FBKSD_CI_TMPFS_MIB", default_value_t = 256)]
     pub tmpfs_mib: u64,
 
+    /// Most disk a checkout (with its `.git`) may take, in MiB; over it,
+    /// the job fails `over_limit`.
+    #[arg(long, env = "FBKSD_CI_MAX_CHECKOUT_MIB", default_value_t = 1024)]
+    pub max_checkout_mib: u64,
+
+    /// Most disk a C++ build directory may take, in MiB (checked while the
+    /// build runs; no single file may pass it either); over it, the job
+    /// fails `over_limit`.
+    #[arg(long, env = "FBKSD_CI_MAX_BUILD_MIB", default_value_t = 2048)]
+    pub max_build_mib: u64,
+
+    /// Most output of one technique run kept on disk, in MiB: the rest is
+    /// left out with a line saying so.
+    #[arg(long, env = "FBKSD_CI_MAX_OUTPUT_MIB", default_value_t = 8)]
+    pub max_output_mib: u64,
+
     /// Processes a container may hold at once.
     #[arg(long, env = "FBKSD_CI_PIDS", default_value_t = 256)]
     pub pids: i64,

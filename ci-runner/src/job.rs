@@ -53,15 +53,90 @@ impl Failure {
 }
 
 impl From<ApiError> for Failure {
+    /// A 413 is the job's own doing (its files or results are larger than
+    /// the server takes): charged to the author, not retried.
     fn from(e: ApiError) -> Failure {
-        Failure::infrastructure(e.to_string())
+        match e {
+            ApiError::Refused { status: 413, body, what } => {
+                Failure::new(FailureReason::OverLimit, format!("the server refused {what}: {body}"))
+            }
+            e => Failure::infrastructure(e.to_string()),
+        }
     }
 }
 
+/// How often a build directory's size is checked.
+const DISK_POLL: Duration = Duration::from_millis(250);
+
+/// Bytes under `dir`, symbolic links counted as links (never followed);
+/// stops counting past `cap`.
+fn disk_usage(dir: &Path, cap: u64) -> u64 {
+    let mut total = 0;
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        for entry in entries.flatten() {
+            let Ok(meta) = entry.path().symlink_metadata() else { continue };
+            if meta.is_dir() {
+                stack.push(entry.path());
+            }
+            // Allocated blocks: a sparse file costs what it occupies.
+            total += std::os::unix::fs::MetadataExt::blocks(&meta) * 512;
+            if total > cap {
+                return total;
+            }
+        }
+    }
+    total
+}
+
+/// Most output held between two sends: a build printing without pause
+/// (`yes`) fills this in a blink, and the rest waits as a count, not in
+/// memory.
+const MAX_PENDING_LOG: usize = 1 << 20;
+
+/// Most bytes per request (the server refuses batches over 2 MB).
+const MAX_LOG_BATCH: usize = 512 << 10;
+
 /// A job's log, sent to the server in batches (see [`JobLog::flush`]).
+/// Bounded: output beyond [`MAX_PENDING_LOG`] is counted and left out with
+/// a line saying how much, and once the server says the log is full (its
+/// `max_log_bytes`) nothing more is sent.
 #[derive(Debug, Clone, Default)]
 pub struct JobLog {
-    pending: Arc<Mutex<String>>,
+    buffer: Arc<Mutex<LogBuffer>>,
+}
+
+#[derive(Debug, Default)]
+struct LogBuffer {
+    pending: String,
+    /// Output bytes left out since the last line that was kept.
+    left_out: u64,
+    /// The server's log is full.
+    full: bool,
+}
+
+impl LogBuffer {
+    /// Adds `text`; output (`own` false) only while there is room, the
+    /// runner's own lines always (they are few, and say what happened).
+    fn add(&mut self, text: &str, own: bool) {
+        if self.full {
+            return;
+        }
+        if !own && self.pending.len() + text.len() > MAX_PENDING_LOG {
+            self.left_out += text.len() as u64;
+            return;
+        }
+        if self.left_out > 0 {
+            let line = format!(
+                "\n[fbksd-ci] {} bytes of output left out here: it came faster than the log is sent\n",
+                self.left_out
+            );
+            self.pending.push_str(&line);
+            self.left_out = 0;
+        }
+        self.pending.push_str(text);
+    }
 }
 
 impl JobLog {
@@ -69,26 +144,47 @@ impl JobLog {
     pub fn line(&self, text: impl AsRef<str>) {
         let text = text.as_ref();
         tracing::info!("{text}");
-        let mut pending = self.pending.lock().unwrap();
-        pending.push_str(text);
-        pending.push('\n');
+        self.buffer.lock().unwrap().add(&format!("{text}\n"), true);
     }
 
     /// Adds raw output (a container's).
     pub fn raw(&self, bytes: &[u8]) {
-        self.pending.lock().unwrap().push_str(&String::from_utf8_lossy(bytes));
+        self.buffer.lock().unwrap().add(&String::from_utf8_lossy(bytes), false);
     }
 
-    /// Sends what is pending. Text leaves the buffer only once the server
-    /// has it, so a flush cut short (server down, job ending) loses nothing.
+    /// Sends what is pending, in batches the server accepts. Text leaves
+    /// the buffer only once the server has it, so a flush cut short (server
+    /// down, job ending) loses nothing; once the server answers that the
+    /// log is full (413), the buffer is dropped and stays empty.
     pub async fn flush(&self, api: &Api, claim: &Claim) -> Result<(), ApiError> {
-        let text = self.pending.lock().unwrap().clone();
-        if text.is_empty() {
-            return Ok(());
+        loop {
+            let batch = {
+                let buffer = self.buffer.lock().unwrap();
+                let mut end = buffer.pending.len().min(MAX_LOG_BATCH);
+                while !buffer.pending.is_char_boundary(end) {
+                    end -= 1;
+                }
+                buffer.pending[..end].to_string()
+            };
+            if batch.is_empty() {
+                return Ok(());
+            }
+            match api.log(claim, &batch).await {
+                Ok(()) => drop(self.buffer.lock().unwrap().pending.drain(..batch.len())),
+                Err(ApiError::Refused { status: 413, body, .. }) => {
+                    tracing::warn!("job {}: {body}", claim.job.id);
+                    let mut buffer = self.buffer.lock().unwrap();
+                    (buffer.full, buffer.pending) = (true, String::new());
+                    return Ok(());
+                }
+                Err(e) => return Err(e),
+            }
         }
-        api.log(claim, &text).await?;
-        self.pending.lock().unwrap().drain(..text.len());
-        Ok(())
+    }
+
+    /// Bytes held for sending (for tests of the bound).
+    pub fn pending_bytes(&self) -> usize {
+        self.buffer.lock().unwrap().pending.len()
     }
 }
 
@@ -126,7 +222,12 @@ pub async fn run(
     cancelled: &Cancelled,
 ) -> Result<String, Failure> {
     let started = Instant::now();
-    std::fs::create_dir_all(dir).map_err(|e| Failure::infrastructure(format!("{}: {e}", dir.display())))?;
+    std::fs::create_dir_all(dir)
+        .and_then(|()| {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+        })
+        .map_err(|e| Failure::infrastructure(format!("{}: {e}", dir.display())))?;
     let src = dir.join("src");
     log.line(format!(
         "[fbksd-ci] job {} ({}, attempt {}) on runner {} ({}, {} cores pinned: {})",
@@ -138,7 +239,7 @@ pub async fn run(
         ctx.machine.cores,
         ctx.machine.cpuset
     ));
-    clone(claim, &src).await?;
+    clone(claim, &src, ctx.config.max_checkout_mib << 20).await?;
     log.line(format!("[fbksd-ci] checked out {} at {}", claim.job.project, claim.commit));
 
     let info = check(&src)?;
@@ -190,7 +291,7 @@ pub async fn run(
 }
 
 /// Clones the repository at the pinned commit into `src`.
-async fn clone(claim: &Claim, src: &Path) -> Result<(), Failure> {
+async fn clone(claim: &Claim, src: &Path, max_bytes: u64) -> Result<(), Failure> {
     use base64::Engine;
     let credentials = base64::engine::general_purpose::STANDARD.encode(format!("fbksd-ci:{}", claim.token));
     let git = |args: &[&str]| {
@@ -206,8 +307,10 @@ async fn clone(claim: &Claim, src: &Path) -> Result<(), Failure> {
         command
     };
     let src_arg = src.to_string_lossy().into_owned();
+    // Blobs come with the checkout, for the pinned commit only: a history
+    // of large pushes is never downloaded whole.
     let steps: [Vec<&str>; 2] = [
-        vec!["clone", "--quiet", "--no-checkout", &claim.repository, &src_arg],
+        vec!["clone", "--quiet", "--no-checkout", "--filter=blob:none", &claim.repository, &src_arg],
         vec!["-C", &src_arg, "-c", "advice.detachedHead=false", "checkout", "--quiet", "--detach", &claim.commit],
     ];
     for args in steps {
@@ -223,12 +326,27 @@ async fn clone(claim: &Claim, src: &Path) -> Result<(), Failure> {
             )));
         }
     }
+    if disk_usage(src, max_bytes) > max_bytes {
+        return Err(Failure::new(
+            FailureReason::OverLimit,
+            format!("the checkout takes more than {} MiB: keep data sets out of the repository", max_bytes >> 20),
+        ));
+    }
     Ok(())
 }
 
 /// Reads and checks `info.json`.
 fn check(src: &Path) -> Result<TechniqueInfo, Failure> {
-    let text = std::fs::read_to_string(src.join("info.json")).map_err(|e| {
+    // Never follow a link from a user's repository on the host: it could
+    // name any file of the runner's machine.
+    let path = src.join("info.json");
+    if path.symlink_metadata().is_ok_and(|m| !m.is_file()) {
+        return Err(Failure::new(
+            FailureReason::BuildFailed,
+            "info.json is a symbolic link or not a file: commit the file itself",
+        ));
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| {
         Failure::new(FailureReason::BuildFailed, format!("info.json: {e}: add it at the repository's root"))
     })?;
     let mut files = Vec::new();
@@ -282,8 +400,15 @@ async fn build(
         Environment::Cpp => {
             let build = dir.join("build");
             std::fs::create_dir_all(&build).map_err(|e| Failure::infrastructure(e.to_string()))?;
+            // The build's user writes it: given to that user by a root
+            // runner, opened to all by another (the job's directory, 0700,
+            // keeps the machine's other users out).
             let (uid, gid) = Sandbox::user();
             std::os::unix::fs::chown(&build, Some(uid), Some(gid))
+                .or_else(|_| {
+                    use std::os::unix::fs::PermissionsExt;
+                    std::fs::set_permissions(&build, std::fs::Permissions::from_mode(0o777))
+                })
                 .map_err(|e| Failure::infrastructure(format!("{}: {e}", build.display())))?;
             let script = format!(
                 "cmake -S /src -B /build -DCMAKE_BUILD_TYPE=Release && cmake --build /build --parallel {}",
@@ -301,6 +426,8 @@ async fn build(
                 memory_mib: ctx.config.memory_mib,
                 job_id: claim.job.id.clone(),
                 cpuset: None,
+                // One file cannot pass the directory's cap between two checks.
+                max_file_bytes: Some((ctx.config.max_build_mib << 20) as i64),
             };
             (spec, Install { host: build })
         }
@@ -316,6 +443,7 @@ async fn build(
                 memory_mib: ctx.config.memory_mib,
                 job_id: claim.job.id.clone(),
                 cpuset: None,
+                max_file_bytes: None,
             };
             (spec, Install { host: src.to_path_buf() })
         }
@@ -343,11 +471,39 @@ async fn build(
             t.drain(..excess);
         }
     };
-    let (end, took) = ctx
-        .sandbox
-        .run_to_end(&spec, ctx.config.build_timeout, sink)
-        .await
-        .map_err(|e| Failure::infrastructure(format!("Docker: cannot run the build container: {e}")))?;
+    // A build directory on the host grows only this far: past it, the
+    // build's containers are removed and the job fails `over_limit`.
+    let max_bytes = ctx.config.max_build_mib << 20;
+    let over = AtomicBool::new(false);
+    let watch = async {
+        loop {
+            tokio::time::sleep(DISK_POLL).await;
+            let dir = install.host.clone();
+            let used = tokio::task::spawn_blocking(move || disk_usage(&dir, max_bytes)).await.unwrap_or(0);
+            if used > max_bytes {
+                over.store(true, Ordering::SeqCst);
+                ctx.sandbox.remove_job_containers(&claim.job.id).await;
+                return;
+            }
+        }
+    };
+    let writes_host = info.environment == Environment::Cpp;
+    let ran = tokio::select! {
+        ran = ctx.sandbox.run_to_end(&spec, ctx.config.build_timeout, sink) => Some(ran),
+        () = watch, if writes_host => None,
+    };
+    // The build may end (killed) before the watch has removed it: the flag says why.
+    let ran = match ran {
+        Some(ran) if !over.load(Ordering::SeqCst) => ran,
+        _ => {
+            return Err(Failure::new(
+                FailureReason::OverLimit,
+                format!("the build directory passed {} MiB: the build was stopped", ctx.config.max_build_mib),
+            ))
+        }
+    };
+    let (end, took) =
+        ran.map_err(|e| Failure::infrastructure(format!("Docker: cannot run the build container: {e}")))?;
     let tail = String::from_utf8_lossy(&tail.lock().unwrap()).trim().to_string();
     let head = String::from_utf8_lossy(&head.lock().unwrap()).into_owned();
     let first_error = first_error_line(&head).or_else(|| first_error_line(&tail));
@@ -454,6 +610,7 @@ async fn benchmark(
             cpuset: cores.as_ref().map(|c| c.renderer.clone()),
         },
         cancelled: cancelled.clone(),
+        max_output_bytes: (ctx.config.max_output_mib << 20) as usize,
     };
     let bench = Benchmark {
         techniques: vec![TechniqueSpec { name: info.short_name.clone(), argv }],
@@ -649,6 +806,32 @@ fn first_error_line(output: &str) -> Option<String> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_loud_build_is_held_to_the_log_bound_and_says_what_it_left_out() {
+        let log = super::JobLog::default();
+        let chunk = vec![b'y'; 64 << 10];
+        // 64 MiB of `yes`, as fast as it comes, with no send in between.
+        for _ in 0..1024 {
+            log.raw(&chunk);
+        }
+        assert!(log.pending_bytes() <= super::MAX_PENDING_LOG, "{} bytes held", log.pending_bytes());
+        log.line("[fbksd-ci] build failed");
+        let text = log.buffer.lock().unwrap().pending.clone();
+        assert!(text.contains(&format!("{} bytes of output left out", 1024 * 65536 - super::MAX_PENDING_LOG)));
+        assert!(text.ends_with("[fbksd-ci] build failed\n"), "the runner's own line is kept");
+    }
+
+    #[test]
+    fn a_symlinked_info_json_is_never_followed_on_the_host() {
+        let src = tempfile::tempdir().unwrap();
+        let secret = src.path().join("secret.json");
+        std::fs::write(&secret, r#"{"short_name": "x", "technique_type": "denoiser"}"#).unwrap();
+        std::os::unix::fs::symlink(&secret, src.path().join("info.json")).unwrap();
+        let failure = super::check(src.path()).unwrap_err();
+        assert_eq!(failure.reason, fbksd_manager::FailureReason::BuildFailed);
+        assert!(failure.message.contains("info.json is a symbolic link"), "{}", failure.message);
+    }
+
     #[test]
     fn a_failed_build_leads_with_its_first_error() {
         let output = "-- Configuring done\n[ 50%] Building CXX object main.cpp.o\n\

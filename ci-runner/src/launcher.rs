@@ -55,6 +55,10 @@ pub struct DockerLauncher {
     pub renderer: RoleContainer,
     /// Set when the job is no longer this runner's: nothing new starts.
     pub cancelled: Arc<AtomicBool>,
+    /// Most output of one container kept in its log file: a technique
+    /// printing without pause is cut there, with a line saying so, and
+    /// runs on.
+    pub max_output_bytes: usize,
 }
 
 impl Launcher for DockerLauncher {
@@ -85,6 +89,7 @@ impl Launcher for DockerLauncher {
             memory_mib: role.memory_mib,
             job_id: self.job_id.clone(),
             cpuset: role.cpuset.clone(),
+            max_file_bytes: None,
         };
         let sandbox = self.sandbox.clone();
         let id = self
@@ -92,7 +97,7 @@ impl Launcher for DockerLauncher {
             .block_on(sandbox.start(&container))
             .map_err(|e| io::Error::other(format!("cannot start a container of {}: {e}", role.image)))?;
         let started = Instant::now();
-        let log = spec.log.map(|p| p.to_path_buf());
+        let (log, max_output) = (spec.log.map(|p| p.to_path_buf()), self.max_output_bytes);
         let running =
             RunningContainer { id: id.clone(), sandbox: sandbox.clone(), handle: self.handle.clone(), started };
         self.handle.spawn(async move {
@@ -113,7 +118,24 @@ impl Launcher for DockerLauncher {
             let output = async {
                 let Some(log) = &log else { return };
                 let Ok(mut file) = std::fs::File::options().create(true).append(true).open(log) else { return };
-                sandbox.follow_output(&id, |bytes| drop(file.write_all(bytes))).await;
+                let mut room = max_output;
+                sandbox
+                    .follow_output(&id, |bytes| {
+                        if room == 0 {
+                            return;
+                        }
+                        let kept = bytes.len().min(room);
+                        let _ = file.write_all(&bytes[..kept]);
+                        room -= kept;
+                        if room == 0 {
+                            let _ = writeln!(
+                                file,
+                                "\n[fbksd-ci] the output passed {} MiB: the rest of it is left out",
+                                max_output >> 20
+                            );
+                        }
+                    })
+                    .await;
             };
             let end = tokio::select! {
                 (end, ()) = async { tokio::join!(sandbox.wait(&id, None), output) } => end,

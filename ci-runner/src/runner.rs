@@ -95,6 +95,11 @@ impl Runner {
         if left > 0 {
             tracing::warn!("removed {left} containers a previous run of this runner left behind");
         }
+        if let Ok(left) = std::fs::read_dir(config.work_dir.join("jobs")) {
+            for job in left.flatten() {
+                remove_job_dir(&sandbox, &images, &job.path()).await;
+            }
+        }
         for dir in [config.work_dir.join("jobs"), rendezvous_parent.clone()] {
             let _ = std::fs::remove_dir_all(&dir);
             std::fs::create_dir_all(&dir)?;
@@ -194,7 +199,7 @@ impl Runner {
             cancelled.store(true, Ordering::SeqCst);
             let removed = ctx.sandbox.remove_job_containers(&claim.job.id).await;
             tracing::warn!("job {} is no longer this runner's: stopped ({removed} containers removed)", claim.job.id);
-            let _ = std::fs::remove_dir_all(&dir);
+            remove_job_dir(&ctx.sandbox, &ctx.images, &dir).await;
             return;
         };
         let body = match &outcome {
@@ -207,10 +212,27 @@ impl Runner {
                 Outcome::failed(*reason, message.clone())
             }
         };
-        if let Err(e) = log.flush(&ctx.api, claim).await {
-            tracing::warn!("job {}: the log's end was not sent: {e}", claim.job.id);
-        }
-        match ctx.api.finish(claim, &body).await {
+        // Reporting may wait out a server restart (JOB_PATIENCE): the lease
+        // is kept meanwhile, or the job would be requeued and run again.
+        let report = async {
+            if let Err(e) = log.flush(&ctx.api, claim).await {
+                tracing::warn!("job {}: the log's end was not sent: {e}", claim.job.id);
+            }
+            ctx.api.finish(claim, &body).await
+        };
+        let heartbeats = async {
+            loop {
+                tokio::time::sleep(beat).await;
+                if let Err(crate::api::ApiError::JobGone) = ctx.api.heartbeat(claim).await {
+                    return;
+                }
+            }
+        };
+        let finished = tokio::select! {
+            finished = report => finished,
+            () = heartbeats => Err(crate::api::ApiError::JobGone),
+        };
+        match finished {
             Ok(url) => {
                 tracing::info!("job {} finished{}", claim.job.id, url.map(|u| format!(": {u}")).unwrap_or_default())
             }
@@ -227,9 +249,23 @@ impl Runner {
         if left > 0 {
             tracing::warn!("job {}: removed {left} containers it left behind", claim.job.id);
         }
-        if let Err(e) = std::fs::remove_dir_all(&dir) {
-            tracing::warn!("job {}: {}: {e}", claim.job.id, dir.display());
-        }
+        remove_job_dir(&ctx.sandbox, &ctx.images, &dir).await;
+    }
+}
+
+/// Removes a job's directory. A runner that is not root cannot remove what
+/// a build wrote as the containers' user: a container empties the build
+/// directory first.
+async fn remove_job_dir(sandbox: &Sandbox, images: &Images, dir: &Path) {
+    if std::fs::remove_dir_all(dir).is_ok() || !dir.exists() {
+        return;
+    }
+    let build = dir.join("build");
+    if build.exists() && !sandbox.empty_as_container_user(&images.renderer.tag, &build).await {
+        tracing::warn!("{}: a container could not empty it", build.display());
+    }
+    if let Err(e) = std::fs::remove_dir_all(dir) {
+        tracing::warn!("{}: {e}", dir.display());
     }
 }
 

@@ -6,6 +6,7 @@
 //! - a read-only root filesystem, a size-capped `/tmp` tmpfs, a non-root user;
 //! - memory limit equal to memory + swap, a pids limit, pinned cores;
 //! - `fsize` and `core` ulimits, a wall-time limit enforced here;
+//! - Docker's copy of the output in a bounded ring (`local` log driver);
 //! - only the mounts named in the [`ContainerSpec`]: never the Docker
 //!   socket, the runner's work directory, the references or any token.
 //!
@@ -17,7 +18,7 @@ use bollard::container::{
     Config, CreateContainerOptions, KillContainerOptions, ListContainersOptions, LogOutput, LogsOptions,
     RemoveContainerOptions, WaitContainerOptions,
 };
-use bollard::models::{HostConfig, ResourcesUlimits};
+use bollard::models::{HostConfig, HostConfigLogConfig, ResourcesUlimits};
 use bollard::Docker;
 use futures_util::StreamExt;
 use std::collections::HashMap;
@@ -63,6 +64,8 @@ pub struct ContainerSpec {
     pub job_id: String,
     /// Cores it is pinned to, when not all of the sandbox's.
     pub cpuset: Option<String>,
+    /// Largest file it may write, when less than the sandbox's 4 GiB.
+    pub max_file_bytes: Option<i64>,
 }
 
 /// How a container ended.
@@ -93,16 +96,31 @@ impl Sandbox {
         Sandbox { docker, runner_id: runner_id.to_string(), cpuset, pids, tmpfs_mib }
     }
 
-    /// The user containers run as: `nobody` when the runner is root, else
-    /// the runner's own (non-root) user, so mounted directories need no chown.
+    /// The user containers run as: `nobody`, whoever runs the runner. Never
+    /// the runner's own user: a technique running as the owner of the
+    /// rendezvous directory could write in it (stash samples between the
+    /// budgets of a scene, swap the ring file for a link before it is
+    /// made), and a build could touch the runner's files.
     pub fn user() -> (u32, u32) {
-        // SAFETY: plain getters.
-        let (uid, gid) = unsafe { (libc::geteuid(), libc::getegid()) };
-        if uid == 0 {
-            (65534, 65534)
-        } else {
-            (uid, gid)
-        }
+        (65534, 65534)
+    }
+
+    /// Empties `dir` from inside a container running as [`Sandbox::user`]:
+    /// a runner that is not root cannot remove what a build wrote as that
+    /// user. `image` is any image with `find`.
+    pub async fn empty_as_container_user(&self, image: &str, dir: &std::path::Path) -> bool {
+        let spec = ContainerSpec {
+            image: image.to_string(),
+            cmd: ["find", "/empty", "-mindepth", "1", "-delete"].map(String::from).to_vec(),
+            env: Vec::new(),
+            mounts: vec![Mount { host: dir.to_path_buf(), container: "/empty".into(), writable: true }],
+            working_dir: None,
+            memory_mib: 256,
+            job_id: "cleanup".into(),
+            cpuset: None,
+            max_file_bytes: None,
+        };
+        matches!(self.run_to_end(&spec, Duration::from_secs(120), |_| {}).await, Ok((end, _)) if end.exit_code == 0)
     }
 
     /// The Docker host configuration of the sandbox.
@@ -123,8 +141,22 @@ impl Sandbox {
             memory_swap: Some(memory),
             pids_limit: Some(self.pids),
             cpuset_cpus: Some(spec.cpuset.clone().unwrap_or_else(|| self.cpuset.clone())),
-            ulimits: Some(vec![ulimit("fsize", MAX_FILE_BYTES), ulimit("core", 0), ulimit("nofile", 4096)]),
+            ulimits: Some(vec![
+                ulimit("fsize", spec.max_file_bytes.unwrap_or(MAX_FILE_BYTES).min(MAX_FILE_BYTES)),
+                ulimit("core", 0),
+                ulimit("nofile", 4096),
+            ]),
             ipc_mode: Some("private".into()),
+            // Docker keeps a container's output on its own disk too: a
+            // bounded ring, read live by `follow_output`, so a container
+            // printing without pause costs at most this much of it.
+            log_config: Some(HostConfigLogConfig {
+                typ: Some("local".into()),
+                config: Some(HashMap::from([
+                    ("max-size".to_string(), "8m".to_string()),
+                    ("max-file".to_string(), "2".to_string()),
+                ])),
+            }),
             binds: Some(
                 spec.mounts
                     .iter()

@@ -79,6 +79,8 @@ pub struct RunnerOptions<'a> {
     pub build_timeout: &'a str,
     pub memory_mib: u64,
     pub env: Vec<(&'a str, String)>,
+    /// Run the runner as this (uid, gid) instead of the test's user.
+    pub user: Option<(u32, u32)>,
 }
 
 impl Default for RunnerOptions<'_> {
@@ -90,6 +92,7 @@ impl Default for RunnerOptions<'_> {
             build_timeout: "120s",
             memory_mib: 512,
             env: Vec::new(),
+            user: None,
         }
     }
 }
@@ -127,6 +130,11 @@ impl RunnerProcess {
             .stderr(std::fs::File::options().append(true).open(&log).unwrap());
         for (k, v) in &options.env {
             command.env(k, v);
+        }
+        if let Some((uid, gid)) = options.user {
+            use std::os::unix::process::CommandExt;
+            std::os::unix::fs::chown(work, Some(uid), Some(gid)).unwrap();
+            command.uid(uid).gid(gid).env("HOME", work);
         }
         RunnerProcess { child: Some(command.spawn().expect("fbksd-ci starts")), work: work.to_path_buf(), log }
     }

@@ -156,9 +156,19 @@ pub struct Ring {
 impl Ring {
     /// Creates the ring file in `dir` without mapping it (manager side:
     /// the manager never touches sample data, so it never maps the ring).
-    pub fn create_file(dir: &Path, spec: RingSpec) -> Result<PathBuf, ShmError> {
+    ///
+    /// `shared`: the file opens to every user (mode 0666) for a renderer and
+    /// a technique that run as other users. The mode is set on the open
+    /// file, never by path: someone who can write the directory could swap
+    /// the name for a link to another file between creation and a `chmod`.
+    pub fn create_file(dir: &Path, spec: RingSpec, shared: bool) -> Result<PathBuf, ShmError> {
+        use std::os::unix::fs::PermissionsExt;
         let path = dir.join(spec.file_name());
-        create_file(&path, spec.total_bytes())?;
+        let file = create_file(&path, spec.total_bytes())?;
+        if shared {
+            file.set_permissions(std::fs::Permissions::from_mode(0o666))
+                .map_err(|source| ShmError::Io { path: path.clone(), source })?;
+        }
         Ok(path)
     }
 
@@ -219,7 +229,7 @@ mod tests {
     fn two_mappings_see_the_same_bytes() {
         let dir = tempfile::tempdir().unwrap();
         let spec = RingSpec { session: 7, slot_count: 2, slot_bytes: 4096 };
-        Ring::create_file(dir.path(), spec).unwrap();
+        Ring::create_file(dir.path(), spec, false).unwrap();
         let a = Ring::open(dir.path(), spec).unwrap();
         let b = Ring::open(dir.path(), spec).unwrap();
         unsafe {

@@ -258,14 +258,7 @@ impl Session {
                     .max(self.spp.max(1) * sample_bytes)
                     .next_multiple_of(4096);
                 let spec = RingSpec { session: self.id, slot_count, slot_bytes };
-                let created = Ring::create_file(&self.dir, spec).map_err(|e| e.to_string()).and_then(|path| {
-                    if self.shared {
-                        use std::os::unix::fs::PermissionsExt;
-                        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o666))
-                            .map_err(|e| format!("{}: {e}", path.display()))?;
-                    }
-                    Ok(())
-                });
+                let created = Ring::create_file(&self.dir, spec, self.shared).map(drop).map_err(|e| e.to_string());
                 if let Err(e) = created {
                     return self.renderer_failed(format!("cannot create the sample ring: {e}"));
                 }
