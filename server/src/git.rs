@@ -661,5 +661,9 @@ mod tests {
         assert_eq!(record.updates.len(), 2);
         assert_eq!(record.updates[0].name, "refs/heads/main");
         assert_eq!(record.options, ["FBKSD_RUN", "FBKSD_PUBLISH=x"]);
+        // A "ref" line among the options is part of an option's value, never an update.
+        let record =
+            PushRecord::parse("ref 0000 abcd refs/heads/main\noption FBKSD_RUN=x\nref 0000 ef01 refs/heads/evil\n");
+        assert_eq!(record.updates.len(), 1);
     }
 }

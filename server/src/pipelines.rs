@@ -613,3 +613,28 @@ pub async fn sweep_uploads(state: &AppState) -> Result<usize, ServiceError> {
     }
     Ok(stale.len())
 }
+
+#[cfg(test)]
+mod tests {
+    /// Runs the `pre-receive` hook with `options` as git passes push options.
+    fn hook_accepts(options: &[&str]) -> (bool, String) {
+        let mut command = std::process::Command::new("sh");
+        command.arg("-c").arg(super::pre_receive_hook()).env("GIT_PUSH_OPTION_COUNT", options.len().to_string());
+        for (i, option) in options.iter().enumerate() {
+            command.env(format!("GIT_PUSH_OPTION_{i}"), option);
+        }
+        let out = command.output().unwrap();
+        (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned())
+    }
+
+    #[test]
+    fn a_push_option_with_a_line_break_is_refused_before_it_reaches_the_push_record() {
+        // Git's own client refuses such options; a hand-made request can send them, and the
+        // post-receive hook writes one line per option.
+        assert!(hook_accepts(&["FBKSD_RUN"]).0);
+        let injected = "FBKSD_RUN=x\nref 0000000000000000000000000000000000000000 abcd refs/heads/other";
+        let (accepted, said) = hook_accepts(&[injected]);
+        assert!(!accepted && said.contains("holds a line break"), "{said}");
+        assert!(!hook_accepts(&["FBKSD_RUN\r"]).0);
+    }
+}
