@@ -28,6 +28,8 @@ pub struct AppState {
     pub boards: crate::leaderboard::BoardCache,
     /// Rate limits on log-ins and account mail.
     pub throttle: crate::throttle::Throttle,
+    /// Metrics for operators (`/metrics`).
+    pub telemetry: crate::telemetry::Telemetry,
 }
 
 impl AppState {
@@ -113,6 +115,7 @@ impl Application {
             job_queued: Arc::new(tokio::sync::Notify::new()),
             boards: Default::default(),
             throttle: crate::throttle::Throttle::new(&config),
+            telemetry: Default::default(),
         };
         // What ended jobs or a crash left in `uploads/`: at start, then hourly.
         let housekeeper = state.clone();

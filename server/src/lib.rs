@@ -35,6 +35,7 @@ pub mod projects;
 pub mod results;
 pub mod routes;
 pub mod runners;
+pub mod telemetry;
 pub mod throttle;
 pub mod viewer;
 

@@ -3,6 +3,7 @@
 //! outbox in ./fbksd-data, and prints the first administrator's one-time
 //! password. `fbksd-server baselines [LIST]` publishes the baseline
 //! techniques through the running service (see `fbksd_server::baselines`).
+//! `FBKSD_LOG_FORMAT=json` logs one JSON object per line.
 
 use clap::Parser;
 use std::path::PathBuf;
@@ -34,9 +35,13 @@ enum Command {
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
-        .init();
+    // FBKSD_LOG_FORMAT=json: one JSON object per line, for log collectors.
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    match std::env::var("FBKSD_LOG_FORMAT").as_deref() {
+        Ok("json") => tracing_subscriber::fmt().json().with_env_filter(filter).init(),
+        Ok("text") | Err(_) => tracing_subscriber::fmt().with_env_filter(filter).init(),
+        Ok(other) => anyhow::bail!("FBKSD_LOG_FORMAT={other:?}: use json or text"),
+    }
     let args = Args::parse();
     let config = fbksd_server::config::Config::load(args.config.as_deref())?;
     if let Some(Command::Baselines { list, url }) = args.command {

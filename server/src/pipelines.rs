@@ -460,6 +460,26 @@ pub async fn finish(
     outcome: Outcome,
 ) -> Result<Option<String>, ServiceError> {
     let job = crate::jobs::get(&state.pool, job_id).await?.ok_or_else(|| ServiceError::internal("job vanished"))?;
+    let (kind, reason) = (job.kind, outcome.reason);
+    let worked = (now_ms() - job.started_at.unwrap_or_else(now_ms)) as f64 / 1e3;
+    let requeued = outcome.state == JobState::Failed
+        && reason == Some(FailureReason::InfrastructureError)
+        && job.attempts < job.max_attempts;
+    let end = if requeued { "requeued" } else { outcome.state.as_str() };
+    let ended = end_job(state, job, attempt, outcome).await;
+    if ended.is_ok() {
+        state.telemetry.job_ended(kind.as_str(), end, worked, reason.map(FailureReason::as_str));
+    }
+    ended
+}
+
+async fn end_job(
+    state: &AppState,
+    job: crate::jobs::Job,
+    attempt: i64,
+    outcome: Outcome,
+) -> Result<Option<String>, ServiceError> {
+    let job_id = job.id.as_str();
     let owner = crate::accounts::user_by_id(&state.pool, &job.user_id).await?;
     match (outcome.state, outcome.reason) {
         (JobState::Succeeded, _) if job.kind == JobKind::Benchmark => {

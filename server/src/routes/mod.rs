@@ -16,6 +16,7 @@ mod accounts;
 mod admin;
 pub mod error;
 pub mod limits;
+mod operations;
 mod pages;
 mod projects;
 mod results;
@@ -114,6 +115,12 @@ pub fn router(state: AppState) -> Router {
         .route("/admin/jobs/{id}/requeue", post(pages::admin_requeue))
         .route("/admin/hide", post(pages::admin_hide))
         .route("/admin/seasons", post(pages::admin_season))
+        // Operators and orchestrators.
+        .route("/healthz", get(operations::healthz))
+        .route("/readyz", get(operations::readyz))
+        .route("/metrics", get(operations::metrics))
+        // After routing, so that answers are timed by their route's pattern.
+        .route_layer(axum::middleware::from_fn_with_state(state.clone(), operations::track))
         .layer(axum::middleware::from_fn_with_state(state.clone(), pages::error_pages_keep_the_header))
         .layer(axum::Extension(limits::StreamSlots::default()))
         .with_state(state)

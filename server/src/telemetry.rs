@@ -1,0 +1,162 @@
+//! What the service tells its operators: Prometheus metrics (served at
+//! `/metrics`) and the readiness check (`/readyz`).
+//!
+//! Counters and histograms are this instance's (Prometheus adds up the
+//! instances): HTTP latencies by route, job durations by kind and end,
+//! failures by reason. Gauges that describe the shared state (queue length
+//! by kind, running jobs, runners by health) are read from the database at
+//! each scrape, so every instance reports the same.
+
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::{exponential_buckets, Histogram};
+use prometheus_client::registry::Registry;
+use sqlx::Row;
+use std::sync::Arc;
+
+/// An HTTP answer: the route's pattern (never the raw path, whose ids would
+/// make a series per job), the method and the status.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct HttpLabels {
+    /// `GET`, `POST`, …
+    pub method: String,
+    /// The route, e.g. `/api/v1/jobs/{id}`; `unmatched` for a 404 of the router.
+    pub route: String,
+    /// HTTP status.
+    pub status: u16,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct KindLabels {
+    kind: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct JobEndLabels {
+    kind: String,
+    state: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct ReasonLabels {
+    reason: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct HealthLabels {
+    health: String,
+}
+
+type Histograms<L> = Family<L, Histogram, fn() -> Histogram>;
+
+/// 1 ms to ~65 s.
+fn latency_buckets() -> Histogram {
+    Histogram::new(exponential_buckets(0.001, 2.0, 17))
+}
+
+/// 1 s to ~9 h.
+fn job_buckets() -> Histogram {
+    Histogram::new(exponential_buckets(1.0, 2.0, 16))
+}
+
+/// The service's metrics.
+#[derive(Clone)]
+pub struct Telemetry(Arc<Metrics>);
+
+struct Metrics {
+    registry: Registry,
+    http: Histograms<HttpLabels>,
+    job_seconds: Histograms<JobEndLabels>,
+    failures: Family<ReasonLabels, Counter>,
+    queued: Family<KindLabels, Gauge>,
+    running: Family<KindLabels, Gauge>,
+    runners: Family<HealthLabels, Gauge>,
+}
+
+impl Default for Telemetry {
+    fn default() -> Telemetry {
+        let mut registry = Registry::with_prefix("fbksd");
+        let metrics = Metrics {
+            http: Family::new_with_constructor(latency_buckets as fn() -> Histogram),
+            job_seconds: Family::new_with_constructor(job_buckets as fn() -> Histogram),
+            failures: Family::default(),
+            queued: Family::default(),
+            running: Family::default(),
+            runners: Family::default(),
+            registry: Registry::default(),
+        };
+        registry.register("http_request_duration_seconds", "HTTP answers by route", metrics.http.clone());
+        registry.register(
+            "job_duration_seconds",
+            "Jobs from start to end, by kind and end (this instance's)",
+            metrics.job_seconds.clone(),
+        );
+        registry.register("job_failures", "Failed job attempts by reason (this instance's)", metrics.failures.clone());
+        registry.register("jobs_queued", "Jobs waiting for a runner, by kind", metrics.queued.clone());
+        registry.register("jobs_running", "Jobs a runner holds, by kind", metrics.running.clone());
+        registry.register(
+            "runners",
+            "Registered runners: healthy (heard from lately) or silent",
+            metrics.runners.clone(),
+        );
+        Telemetry(Arc::new(Metrics { registry, ..metrics }))
+    }
+}
+
+impl Telemetry {
+    /// Counts an HTTP answer.
+    pub fn http(&self, labels: HttpLabels, seconds: f64) {
+        self.0.http.get_or_create(&labels).observe(seconds);
+    }
+
+    /// Counts a job's end (`state`: succeeded, failed, requeued) after
+    /// `seconds` of work, and a failure's reason.
+    pub fn job_ended(&self, kind: &str, state: &str, seconds: f64, reason: Option<&str>) {
+        let labels = JobEndLabels { kind: kind.into(), state: state.into() };
+        self.0.job_seconds.get_or_create(&labels).observe(seconds.max(0.0));
+        if let Some(reason) = reason {
+            self.0.failures.get_or_create(&ReasonLabels { reason: reason.into() }).inc();
+        }
+    }
+
+    /// The metrics in Prometheus' text format, the shared gauges read now.
+    pub async fn render(&self, state: &crate::AppState) -> Result<String, sqlx::Error> {
+        let rows = sqlx::query(
+            "SELECT kind, state, COUNT(*) AS n FROM jobs WHERE state IN ('queued', 'running') GROUP BY kind, state",
+        )
+        .fetch_all(&state.pool)
+        .await?;
+        for kind in ["build", "benchmark"] {
+            self.0.queued.get_or_create(&KindLabels { kind: kind.into() }).set(0);
+            self.0.running.get_or_create(&KindLabels { kind: kind.into() }).set(0);
+        }
+        for row in rows {
+            let (kind, job_state, n): (String, String, i64) = (row.try_get(0)?, row.try_get(1)?, row.try_get(2)?);
+            let family = if job_state == "queued" { &self.0.queued } else { &self.0.running };
+            family.get_or_create(&KindLabels { kind }).set(n);
+        }
+        let now = crate::now_ms();
+        let runners = crate::runners::all(&state.pool).await?;
+        let healthy = runners.iter().filter(|r| r.healthy(&state.config, now)).count() as i64;
+        self.0.runners.get_or_create(&HealthLabels { health: "healthy".into() }).set(healthy);
+        self.0.runners.get_or_create(&HealthLabels { health: "silent".into() }).set(runners.len() as i64 - healthy);
+        let mut text = String::new();
+        prometheus_client::encoding::text::encode(&mut text, &self.0.registry).map_err(sqlx::Error::decode)?;
+        Ok(text)
+    }
+}
+
+/// Whether this instance can serve: its database answers and its data
+/// directory takes a file. `Err` says what is wrong.
+pub async fn ready(state: &crate::AppState) -> Result<(), String> {
+    sqlx::query("SELECT 1").fetch_one(&state.pool).await.map_err(|e| format!("the database does not answer: {e}"))?;
+    let uploads = state.config.data_dir.join("uploads");
+    let probe = uploads.join(format!(".ready-{}", uuid::Uuid::new_v4()));
+    tokio::fs::write(&probe, b"")
+        .await
+        .map_err(|e| format!("the data directory takes no file ({}): {e}", uploads.display()))?;
+    let _ = tokio::fs::remove_file(&probe).await;
+    Ok(())
+}
