@@ -22,6 +22,7 @@
 pub mod accounts;
 pub mod admin;
 mod app;
+pub mod backup;
 pub mod baselines;
 pub mod config;
 pub mod db;

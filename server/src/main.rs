@@ -3,7 +3,9 @@
 //! outbox in ./fbksd-data, and prints the first administrator's one-time
 //! password. `fbksd-server baselines [LIST]` publishes the baseline
 //! techniques through the running service (see `fbksd_server::baselines`).
-//! `FBKSD_LOG_FORMAT=json` logs one JSON object per line.
+//! `fbksd-server backup DIR` and `restore DIR` save and bring back a
+//! service (see `fbksd_server::backup`). `FBKSD_LOG_FORMAT=json` logs one
+//! JSON object per line.
 
 use clap::Parser;
 use std::path::PathBuf;
@@ -31,6 +33,18 @@ enum Command {
         #[arg(long)]
         url: Option<String>,
     },
+    /// Copies the database and the files the service cannot make again
+    /// into DIR (new, or empty), while the service runs.
+    Backup {
+        /// Where the backup goes.
+        dir: PathBuf,
+    },
+    /// Restores a backup into the configured data directory and database,
+    /// which must be empty; then start the server as usual.
+    Restore {
+        /// The backup.
+        dir: PathBuf,
+    },
 }
 
 #[tokio::main]
@@ -44,8 +58,19 @@ async fn main() -> anyhow::Result<()> {
     }
     let args = Args::parse();
     let config = fbksd_server::config::Config::load(args.config.as_deref())?;
-    if let Some(Command::Baselines { list, url }) = args.command {
-        return fbksd_server::baselines::submit(&config, &list, url).await;
+    match args.command {
+        Some(Command::Baselines { list, url }) => return fbksd_server::baselines::submit(&config, &list, url).await,
+        Some(Command::Backup { dir }) => {
+            fbksd_server::backup::backup(&config, &dir).await?;
+            println!("backup of {} written to {}", config.data_dir.display(), dir.display());
+            return Ok(());
+        }
+        Some(Command::Restore { dir }) => {
+            fbksd_server::backup::restore(&config, &dir).await?;
+            println!("{} restored into {}: start the server", dir.display(), config.data_dir.display());
+            return Ok(());
+        }
+        None => {}
     }
     let app = fbksd_server::Application::build(config).await?;
     let config = app.config();

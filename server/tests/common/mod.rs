@@ -28,7 +28,7 @@ fn postgres_admin_url() -> String {
 }
 
 /// A fresh, empty PostgreSQL database; its URL.
-async fn fresh_postgres() -> String {
+pub async fn fresh_postgres() -> String {
     use sqlx::Connection;
     let admin = postgres_admin_url();
     let mut conn = sqlx::PgConnection::connect(&admin).await.unwrap_or_else(|e| {
