@@ -541,17 +541,10 @@ pub async fn take_pending_result_id(pool: &AnyPool, job_id: &str) -> Result<Opti
     Ok(pending)
 }
 
-/// Jobs that are not running, of the ids given: their uploads are stale.
-pub async fn not_running(pool: &AnyPool, job_ids: &[String]) -> Result<Vec<String>, sqlx::Error> {
-    let mut out = Vec::new();
-    for id in job_ids {
-        let row = sqlx::query("SELECT state FROM jobs WHERE id = $1").bind(id).fetch_optional(pool).await?;
-        let running = row.map(|r| r.try_get::<String, _>(0)).transpose()?.is_some_and(|s| s == "running");
-        if !running {
-            out.push(id.clone());
-        }
-    }
-    Ok(out)
+/// The ids of the jobs a runner holds now.
+pub async fn running_ids(pool: &AnyPool) -> Result<std::collections::HashSet<String>, sqlx::Error> {
+    let rows = sqlx::query("SELECT id FROM jobs WHERE state = 'running'").fetch_all(pool).await?;
+    rows.iter().map(|r| r.try_get(0)).collect()
 }
 
 /// Ends the leases of a removed runner's running jobs, so the sweeper

@@ -623,15 +623,17 @@ pub async fn discard_attempt(state: &AppState, job_id: &str) -> Result<(), Servi
 pub async fn sweep_uploads(state: &AppState) -> Result<usize, ServiceError> {
     let uploads = state.config.data_dir.join("uploads");
     let Ok(mut entries) = tokio::fs::read_dir(&uploads).await else { return Ok(0) };
-    let mut ids = Vec::new();
+    let running = crate::jobs::running_ids(&state.pool).await?;
+    let mut stale = 0;
     while let Ok(Some(entry)) = entries.next_entry().await {
-        ids.push(entry.file_name().to_string_lossy().into_owned());
+        // A job's uploads are a directory named by its id (readiness probes are files).
+        let id = entry.file_name().to_string_lossy().into_owned();
+        if entry.file_type().await.is_ok_and(|t| t.is_dir()) && !running.contains(&id) {
+            discard_attempt(state, &id).await?;
+            stale += 1;
+        }
     }
-    let stale = crate::jobs::not_running(&state.pool, &ids).await?;
-    for id in &stale {
-        discard_attempt(state, id).await?;
-    }
-    Ok(stale.len())
+    Ok(stale)
 }
 
 #[cfg(test)]
