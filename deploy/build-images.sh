@@ -79,7 +79,7 @@ stage_python() {
 stage_renderer() {
     mkdir -p "$1/bin" "$1/scenes"
     cp "$bin_dir/fbksd-procedural" "$bin_dir/fbksd-embree" "$1/bin/"
-    (cd scenes && find . -type f ! -name 'reference.*' ! -name '*.py' ! -name '*.md' -print0 \
+    (cd scenes && find . -type f ! -name 'reference.*' ! -name 'reference-*' ! -name '*.py' ! -name '*.md' -print0 \
         | xargs -0 cp --parents -t "$1/scenes")
 }
 

@@ -161,12 +161,13 @@ impl Api {
 
     /// Whether the server already holds the viewer's pixels of reference
     /// `hash`; when not, they go with the job's files.
-    pub async fn has_reference(&self, job: &Claim, hash: &str) -> Result<bool, ApiError> {
-        let what = format!("reference {hash}");
-        match self
-            .send(&what, JOB_PATIENCE, || self.job_request(job, reqwest::Method::GET, &format!("references/{hash}")))
-            .await
-        {
+    pub async fn has_reference(&self, job: &Claim, hash: &str, buffer: Option<&str>) -> Result<bool, ApiError> {
+        let what = format!("reference {hash}{}", buffer.map(|b| format!(" ({b} buffer)")).unwrap_or_default());
+        let path = match buffer {
+            None => format!("references/{hash}"),
+            Some(b) => format!("references/{hash}?buffer={b}"),
+        };
+        match self.send(&what, JOB_PATIENCE, || self.job_request(job, reqwest::Method::GET, &path)).await {
             Ok(_) => Ok(true),
             Err(ApiError::Refused { status: 404, .. }) => Ok(false),
             Err(e) => Err(e),

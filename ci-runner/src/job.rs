@@ -746,29 +746,38 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
 }
 
 /// The viewer's pixel files of the references the server lacks (it keeps
-/// one per reference digest), written under `results/references/`.
+/// one per reference digest) and of the feature buffers made with them,
+/// written under `results/references/`.
 async fn references_to_upload(
     ctx: &JobContext,
     claim: &Claim,
     results: &Path,
 ) -> Result<Vec<(String, PathBuf)>, Failure> {
+    use fbksd_exchange::pixels::{uploaded_reference_buffer_name, uploaded_reference_name};
     let mut out = Vec::new();
     for scene in ctx.scenes.iter() {
-        if ctx.api.has_reference(claim, &scene.reference_hash).await? {
-            continue;
+        let hash = &scene.reference_hash;
+        let buffers = fbksd_exchange::scenes::FEATURE_BUFFERS.iter().map(|b| Some(*b));
+        for buffer in std::iter::once(None).chain(buffers) {
+            let (name, source) = match buffer {
+                None => (uploaded_reference_name(hash), scene.meta.reference_file()),
+                Some(b) => (uploaded_reference_buffer_name(hash, b), scene.meta.feature_buffer_file(b)),
+            };
+            let Some(name) = name else { continue };
+            if (buffer.is_some() && !source.is_file()) || ctx.api.has_reference(claim, hash, buffer).await? {
+                continue;
+            }
+            let path = results.join(&name);
+            let bytes =
+                tokio::task::spawn_blocking(move || fbksd_iqa::image::Image::read(&source).map(|i| i.pixels_file()))
+                    .await
+                    .map_err(|e| Failure::infrastructure(format!("encoding a reference panicked: {e}")))?
+                    .map_err(|e| Failure::infrastructure(format!("the reference of {}: {e}", scene.meta.name)))?;
+            std::fs::create_dir_all(results.join("references"))
+                .and_then(|()| std::fs::write(&path, bytes))
+                .map_err(|e| Failure::infrastructure(format!("{}: {e}", path.display())))?;
+            out.push((name, path));
         }
-        let Some(name) = fbksd_exchange::pixels::uploaded_reference_name(&scene.reference_hash) else { continue };
-        let path = results.join(&name);
-        let reference = scene.meta.reference_file();
-        let bytes =
-            tokio::task::spawn_blocking(move || fbksd_iqa::image::Image::read(&reference).map(|i| i.pixels_file()))
-                .await
-                .map_err(|e| Failure::infrastructure(format!("encoding a reference panicked: {e}")))?
-                .map_err(|e| Failure::infrastructure(format!("the reference of {}: {e}", scene.meta.name)))?;
-        std::fs::create_dir_all(results.join("references"))
-            .and_then(|()| std::fs::write(&path, bytes))
-            .map_err(|e| Failure::infrastructure(format!("{}: {e}", path.display())))?;
-        out.push((name, path));
     }
     Ok(out)
 }

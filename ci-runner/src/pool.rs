@@ -1,5 +1,5 @@
 //! The runner's scene pool: the scenes it benchmarks on, with their
-//! references, made where missing ([`make_missing_references`], with the
+//! references and feature buffers, made where missing ([`make_missing_references`], with the
 //! renderer programs next to the runner or on PATH; the server is told of
 //! the progress) and checked and hashed once when the runner starts.
 //!
@@ -46,10 +46,23 @@ pub async fn make_missing_references(
     runner_token: &str,
 ) -> anyhow::Result<()> {
     let mut missing = Vec::new();
+    let mut kept = Vec::new();
     for rel in dirs {
         let meta = SceneMeta::load(&root.join(rel)).map_err(|e| anyhow::anyhow!("scene pool: {e}"))?;
-        if !meta.reference_file().is_file() {
+        if meta.reference_file().is_file() {
+            kept.push((rel, meta));
+        } else {
             missing.push((rel, meta));
+        }
+    }
+    // A kept reference is still handed to its renderer, which keeps it when
+    // it is current and makes only the feature buffers it lacks.
+    for (rel, meta) in &kept {
+        let program = fbksd_exchange::scenes::renderer_program(&meta.renderer)
+            .map_err(|e| anyhow::anyhow!("scene pool: the reference of {rel}: {e}"))?;
+        let exit = tokio::process::Command::new(&program).arg("reference").arg(root.join(rel)).status().await?;
+        if !exit.success() {
+            anyhow::bail!("scene pool: {} reference {} failed ({exit})", program.display(), root.join(rel).display());
         }
     }
     for (i, (rel, meta)) in missing.iter().enumerate() {

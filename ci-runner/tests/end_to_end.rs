@@ -119,6 +119,15 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
             assert_eq!((result.width, result.height), (reference.width, reference.height), "{scene}");
             assert!(run["error_maps"]["MSE"].is_string() && run["log"].is_string(), "{run}");
             assert!(run["wall_ms"].as_f64().unwrap() > 0.0 && run["peak_memory_bytes"].as_u64().unwrap() > 0, "{run}");
+            // The path tracer makes every feature buffer with its reference.
+            if scene["name"] == "cornell-box" {
+                for buffer in fbksd_exchange::scenes::FEATURE_BUFFERS {
+                    let address = scene["buffers"][buffer].as_str().unwrap_or_else(|| panic!("no {buffer}: {scene}"));
+                    let pixels = pixels_of(address.into()).await;
+                    assert_eq!((pixels.width, pixels.height), (reference.width, reference.height), "{buffer}");
+                    assert!(pixels.values.iter().any(|v| *v != 0.0), "{buffer} is all zero");
+                }
+            }
         }
         for run in doc["techniques"][0]["runs"].as_array().unwrap() {
             let pixels = pixels_of(run["pixels"].as_str().unwrap().into()).await;

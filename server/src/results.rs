@@ -543,15 +543,36 @@ pub fn reference_pixels(data_dir: &std::path::Path, reference_hash: &str) -> Opt
     fbksd_exchange::pixels::uploaded_reference_name(reference_hash).map(|name| data_dir.join(name))
 }
 
-/// Moves the references a job uploaded among a new set's files to the
-/// shared store (keeping a copy already there), and drops the rest of
-/// `references/`.
+/// Where the pixel file of feature buffer `buffer` made with a reference
+/// lives (`references/<hex>.<buffer>.fbpx`), beside the reference's.
+pub fn reference_buffer_pixels(
+    data_dir: &std::path::Path,
+    reference_hash: &str,
+    buffer: &str,
+) -> Option<std::path::PathBuf> {
+    fbksd_exchange::pixels::uploaded_reference_buffer_name(reference_hash, buffer).map(|name| data_dir.join(name))
+}
+
+/// Moves the references (and their feature buffers) a job uploaded among a
+/// new set's files to the shared store (keeping a copy already there), and
+/// drops the rest of `references/`.
 pub async fn keep_references(data_dir: &std::path::Path, set_dir: &std::path::Path, upload: &Upload) {
+    // Collected first: an iterator of closures held across the awaits below
+    // would make the future not Send.
+    let mut files: Vec<(&str, Option<&str>)> = Vec::new();
     for scene in &upload.scenes {
-        let (Some(name), Some(store)) = (
-            fbksd_exchange::pixels::uploaded_reference_name(&scene.reference_hash),
-            reference_pixels(data_dir, &scene.reference_hash),
-        ) else {
+        files.push((&scene.reference_hash, None));
+        files.extend(fbksd_exchange::scenes::FEATURE_BUFFERS.iter().map(|b| (scene.reference_hash.as_str(), Some(*b))));
+    }
+    for (hash, buffer) in files {
+        let (name, store) = match buffer {
+            None => (fbksd_exchange::pixels::uploaded_reference_name(hash), reference_pixels(data_dir, hash)),
+            Some(b) => (
+                fbksd_exchange::pixels::uploaded_reference_buffer_name(hash, b),
+                reference_buffer_pixels(data_dir, hash, b),
+            ),
+        };
+        let (Some(name), Some(store)) = (name, store) else {
             continue;
         };
         let staged = set_dir.join(name);
@@ -560,7 +581,7 @@ pub async fn keep_references(data_dir: &std::path::Path, set_dir: &std::path::Pa
                 let _ = tokio::fs::create_dir_all(parent).await;
             }
             if let Err(e) = tokio::fs::rename(&staged, &store).await {
-                tracing::warn!("keeping reference {}: {e}", scene.reference_hash);
+                tracing::warn!("keeping reference {hash}: {e}");
             }
         }
     }

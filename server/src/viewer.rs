@@ -1,7 +1,8 @@
 //! The results viewer's document for a result set: the set beside every
 //! published technique of its season, on the set's scenes, with the
 //! addresses of every file the viewer may show (pixels, error maps, logs,
-//! references). `frontend/static/viewer/` draws it; `fbksd results page`
+//! references and the feature buffers made with them).
+//! `frontend/static/viewer/` draws it; `fbksd results page`
 //! writes the same document for a local results directory.
 //!
 //! Only files that exist are named, so the viewer never offers an image it
@@ -10,6 +11,7 @@
 use crate::error::ServiceError;
 use crate::results::{self, ResultSet, Selection, StoredRun};
 use fbksd_exchange::results::RunFiles;
+use fbksd_exchange::scenes::FEATURE_BUFFERS;
 use fbksd_exchange::viewer::{Delivery, Rankings, ViewerData, ViewerRun, ViewerScene, ViewerTechnique};
 use sqlx::AnyPool;
 use std::collections::{BTreeMap, BTreeSet};
@@ -30,13 +32,20 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
     doc.highlight = Some(set.id.clone());
     doc.metrics = set.metrics.clone();
     for (name, tags) in &tags {
-        let reference = match results::reference_hash(pool, &set.id, name).await? {
-            Some(hash) if results::reference_pixels(data_dir, &hash).is_some_and(|p| p.is_file()) => {
+        let hash = results::reference_hash(pool, &set.id, name).await?;
+        let stored = |path: Option<std::path::PathBuf>| path.is_some_and(|p| p.is_file());
+        let reference = match &hash {
+            Some(hash) if stored(results::reference_pixels(data_dir, hash)) => {
                 Some(format!("/results/{}/references/{name}", set.id))
             }
             _ => None,
         };
-        doc.scenes.push(ViewerScene { name: name.clone(), tags: tags.iter().cloned().collect(), reference });
+        let buffers = FEATURE_BUFFERS
+            .iter()
+            .filter(|b| hash.as_ref().is_some_and(|h| stored(results::reference_buffer_pixels(data_dir, h, b))))
+            .map(|b| (b.to_string(), format!("/results/{}/references/{name}/{b}", set.id)))
+            .collect();
+        doc.scenes.push(ViewerScene { name: name.clone(), tags: tags.iter().cloned().collect(), reference, buffers });
     }
     let metrics_with_maps: Vec<String> =
         set.metrics.iter().filter(|m| m.has_error_map).map(|m| m.acronym.clone()).collect();

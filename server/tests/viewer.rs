@@ -134,6 +134,8 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
         format!("{}{}", server.url, own_run["log"].as_str().unwrap()),
         format!("{}{}", server.url, own_run["error_maps"]["MSE"].as_str().unwrap()),
         format!("{}{}", server.url, doc["scenes"][0]["reference"].as_str().unwrap()),
+        format!("{}{}", server.url, doc["scenes"][0]["buffers"]["albedo"].as_str().unwrap()),
+        format!("{}/results/{adas}", server.url),
     ];
     for url in &private_urls {
         assert_eq!(ada.browser.get(url).send().await.unwrap().status(), 200, "{url}");
@@ -141,6 +143,22 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
             assert_eq!(client.get(url).send().await.unwrap().status(), 404, "{who}: {url}");
         }
     }
+
+    // The document travels gzipped; pixel files are gzip already and are sent as they are.
+    let gzip = |url: String| {
+        let client = ada.browser.clone();
+        async move {
+            let response = client.get(&url).header("accept-encoding", "gzip").send().await.unwrap();
+            response.headers().get("content-encoding").map(|v| v.to_str().unwrap().to_string())
+        }
+    };
+    assert_eq!(gzip(viewer_doc.clone()).await.as_deref(), Some("gzip"), "the viewer's document");
+    assert_eq!(
+        gzip(format!("{}/static/viewer/viewer.js", server.url)).await.as_deref(),
+        Some("gzip"),
+        "the viewer's code"
+    );
+    assert_eq!(gzip(private_urls[1].clone()).await, None, "a pixel file");
 
     // Ada logs in with the form and opens her private page.
     let browser = Browser::start().await;
@@ -228,6 +246,86 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
     tokio::time::sleep(Duration::from_millis(200)).await;
     check_crops((20, 20)).await;
 
+    // Split at the middle: Ada's image left of the line, the reference
+    // (image B) right of it; a flip (f) shows B alone, a second one A.
+    browser.press("r").await;
+    browser.press("s").await;
+    browser
+        .wait_for(
+            "the split view",
+            "document.querySelector('canvas.main').dataset.shown.includes(' split ')",
+            Duration::from_secs(5),
+        )
+        .await;
+    let canvas = browser.eval("const r = document.querySelector('canvas.main').getBoundingClientRect(); return { left: r.left, width: r.width };").await;
+    let split_x = canvas["left"].as_f64().unwrap() + 0.5 * canvas["width"].as_f64().unwrap();
+    let shot = browser.screenshot().await;
+    let mut sides = [0, 0];
+    for x in [2u32, W / 2 - 3, W / 2 + 3, W - 3] {
+        let (sx, sy) = centre(&browser.eval(&format!("return FBKSD.viewer.comparison.screenOf({x}, {py});")).await);
+        if (sx - split_x).abs() < 2.0 {
+            continue;
+        }
+        let right = sx > split_x;
+        sides[right as usize] += 1;
+        let pixels = if right { reference(0) } else { result(0, 0, 4) };
+        let k = ((py * W + x) * 3) as usize;
+        let want: Vec<u8> = (0..3).map(|c| srgb_byte(2.0 * pixels[k + c])).collect();
+        assert_eq!(seen(&shot, sx, sy).to_vec(), want, "split view at pixel ({x}, {py}), right of the line: {right}");
+    }
+    assert!(sides[0] > 0 && sides[1] > 0, "pixels on both sides of the split: {sides:?}");
+    let sin_bands = doc["scenes"].as_array().unwrap().iter().find(|s| s["name"] == "sin-bands").unwrap().clone();
+    let reference_pixels = sin_bands["reference"].as_str().unwrap().to_string();
+    browser.press("f").await;
+    browser
+        .wait_for(
+            "the flip to B",
+            &format!("document.querySelector('canvas.main').dataset.shown.startsWith('{reference_pixels} flip ')"),
+            Duration::from_secs(5),
+        )
+        .await;
+    let (sx, sy) = centre(&browser.eval(&format!("return FBKSD.viewer.comparison.screenOf({px}, {py});")).await);
+    let k = ((py * W + px) * 3) as usize;
+    let want: Vec<u8> = (0..3).map(|c| srgb_byte(2.0 * reference(0)[k + c])).collect();
+    assert_eq!(seen(&browser.screenshot().await, sx, sy).to_vec(), want, "flipped to the reference");
+    browser.press("f").await;
+    browser
+        .wait_for(
+            "the flip back to A",
+            &format!("document.querySelector('canvas.main').dataset.shown.startsWith('{ada_pixels} flip ')"),
+            Duration::from_secs(5),
+        )
+        .await;
+
+    // False colour: the pixel's luminance, log2 from -8 to +4 stops, on the ramp.
+    browser.click("#fbksd-viewer input[name=false_colour]").await;
+    browser
+        .wait_for(
+            "false colour",
+            "document.querySelector('canvas.main').dataset.shown.includes('|true')",
+            Duration::from_secs(5),
+        )
+        .await;
+    let y = 2.0 * (0.2126 * value(0) as f64 + 0.7152 * value(1) as f64 + 0.0722 * value(2) as f64);
+    let t = (((y.log2() + 8.0) / 12.0) * 255.0).round().clamp(0.0, 255.0) / 255.0;
+    assert_eq!(seen(&browser.screenshot().await, sx, sy), false_colour(t), "false colour of luminance {y}");
+    browser.click("#fbksd-viewer input[name=false_colour]").await;
+
+    // The feature buffers made with the reference are images A can show.
+    browser.select("#fbksd-viewer select[name=a]", "reference:albedo").await;
+    let albedo_pixels = sin_bands["buffers"]["albedo"].as_str().expect("the albedo buffer in the document").to_string();
+    browser
+        .wait_for(
+            "the albedo buffer",
+            &format!("document.querySelector('canvas.main').dataset.shown.startsWith('{albedo_pixels} ')"),
+            Duration::from_secs(5),
+        )
+        .await;
+    let albedo = common::albedo((W, H), 0);
+    let want: Vec<u8> = (0..3).map(|c| srgb_byte(2.0 * albedo[k + c])).collect();
+    assert_eq!(seen(&browser.screenshot().await, sx, sy).to_vec(), want, "the albedo buffer at ({px}, {py})");
+    browser.select("#fbksd-viewer select[name=a]", adas).await;
+
     // One chart line per technique; its SVG export opens as an image.
     let lines =
         browser.eval("return [...document.querySelectorAll('svg.chart g.series')].map(g => g.dataset.name);").await;
@@ -236,6 +334,10 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
         .eval_async("const url = URL.createObjectURL(new Blob([FBKSD.svgText(FBKSD.viewer.chart)], { type: 'image/svg+xml' })); const img = new Image(); img.src = url; await img.decode(); return { width: img.naturalWidth, text: FBKSD.svgText(FBKSD.viewer.chart).slice(0, 60) };")
         .await;
     assert_eq!(exported["width"], 560, "{exported}");
+    let png = browser
+        .eval_async("const blob = await FBKSD.svgToPng(FBKSD.viewer.chart); const img = await createImageBitmap(blob); return { type: blob.type, width: img.width };")
+        .await;
+    assert_eq!(png, serde_json::json!({ "type": "image/png", "width": 1120 }), "the PNG export at twice the size");
     let csv = browser.eval("return FBKSD.viewer.chartCsv();").await;
     assert_eq!(csv.as_str().unwrap().lines().count(), 1 + 3 * SPPS.len(), "{csv}");
 
@@ -249,6 +351,22 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
         let highlighted = browser.eval("return document.querySelector('table.ranking tr.highlight').rowIndex;").await;
         assert_eq!(highlighted, place, "Ada's place on {scene} (first on all scenes: {all_scenes})");
     }
+    // The grid colours each scene's cell by its rank: the first green, the last red.
+    browser.select("#fbksd-viewer select[name=tag]", "").await;
+    browser
+        .wait_for(
+            "the ranking on all scenes",
+            "document.querySelectorAll('table.ranking thead th.scene').length === 2",
+            Duration::from_secs(5),
+        )
+        .await;
+    let hues = browser
+        .eval("return [...document.querySelectorAll('table.ranking tbody tr')].map(tr => getComputedStyle(tr.cells[tr.cells.length - 2]).backgroundColor);")
+        .await;
+    let hues: Vec<String> = serde_json::from_value(hues).unwrap();
+    assert_eq!(hues.len(), 3, "{hues:?}");
+    let distinct: std::collections::BTreeSet<&String> = hues.iter().collect();
+    assert_eq!(distinct.len(), 3, "three ranks, three colours on sin-bands: {hues:?}");
 
     // Each run's costs are on the page.
     let costs = browser.text("table.costs").await;
@@ -258,8 +376,24 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
     browser.close().await;
 }
 
+/// The viewer's false-colour ramp at `t` in [0, 1], as 8-bit RGB: its
+/// stops, linearly interpolated, rounded.
+fn false_colour(t: f64) -> [u8; 3] {
+    const STOPS: [(f64, [f64; 3]); 5] = [
+        (0.0, [13.0, 8.0, 135.0]),
+        (0.25, [84.0, 2.0, 163.0]),
+        (0.5, [33.0, 145.0, 140.0]),
+        (0.75, [144.0, 215.0, 67.0]),
+        (1.0, [253.0, 231.0, 37.0]),
+    ];
+    let i = STOPS.iter().position(|(at, _)| t <= *at).unwrap_or(4).max(1);
+    let ((a, ca), (b, cb)) = (STOPS[i - 1], STOPS[i]);
+    let u = (t - a) / (b - a);
+    [0, 1, 2].map(|c| (ca[c] + u * (cb[c] - ca[c]) + 0.5).floor() as u8)
+}
+
 /// With `FBKSD_SCREENSHOTS=<dir>`, saves what the window shows, scrolled to
-/// `css`, for the docs (docs/viewer-*.png were made so).
+/// `css`, for the docs (frontend/screenshots/viewer-*.png were made so).
 async fn screenshot(browser: &Browser, name: &str, css: &str) {
     if let Ok(dir) = std::env::var("FBKSD_SCREENSHOTS") {
         browser.eval(&format!("document.querySelector('{css}').scrollIntoView({{ block: 'start' }});")).await;

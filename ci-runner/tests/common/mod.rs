@@ -60,10 +60,9 @@ pub fn images() -> PathBuf {
 /// Makes the references of `scenes` that are missing.
 pub fn references(scenes: &[&str]) {
     for scene in scenes {
+        // Always asked: a current reference is kept, and only its missing
+        // feature buffers are made.
         let dir = workspace().join("scenes").join(scene);
-        if dir.join("reference.exr").is_file() {
-            continue;
-        }
         let meta = fbksd_exchange::scenes::SceneMeta::load(&dir).unwrap();
         let mut make = Command::new(bin_dir().join(format!("fbksd-{}", meta.renderer)));
         make.arg("reference").arg(&dir);

@@ -74,6 +74,7 @@
 
     label(key) {
       if (key === "reference") return "Reference";
+      if (key.startsWith("reference:")) return "Reference · " + key.slice(10) + " buffer";
       return FBKSD.techniqueLabel(this.technique(key)) || key;
     }
 
@@ -84,6 +85,12 @@
         const scene = this.doc.scenes.find((x) => x.name === s.scene);
         return scene && scene.reference ? { address: scene.reference, kind: "pixels", label: "Reference" } : null;
       }
+      // A feature buffer made with the reference (albedo, normal, depth).
+      if (key.startsWith("reference:")) {
+        const scene = this.doc.scenes.find((x) => x.name === s.scene);
+        const address = scene && scene.buffers && scene.buffers[key.slice(10)];
+        return address ? { address, kind: "pixels", label: this.label(key) } : null;
+      }
       const run = this.run(key, s.scene, s.spp);
       if (!run) return null;
       if (layer === "image") return run.pixels ? { address: run.pixels, kind: "pixels", label: this.label(key) } : null;
@@ -93,6 +100,7 @@
 
     missingReason(key, layer) {
       if (key === "reference") return "this scene's reference is not stored";
+      if (key.startsWith("reference:")) return "this scene has no " + key.slice(10) + " buffer";
       const run = this.run(key, this.state.scene, this.state.spp);
       if (!run) return this.label(key) + " has no run at " + this.state.spp + " spp";
       if (run.status !== "ok") return this.label(key) + ": " + run.status + (run.message ? " (" + run.message + ")" : "");
@@ -122,7 +130,10 @@
       const d = this.doc, s = this.state;
       this.sceneSelect = h("select", { name: "scene", onchange: (e) => this.selectScene(e.target.value) });
       this.sppSelect = h("select", { name: "spp", onchange: (e) => this.set({ spp: Number(e.target.value) }) });
-      const sources = [["reference", "Reference"], ...d.techniques.map((t) => [t.key, FBKSD.techniqueLabel(t)])];
+      // Feature buffers any scene has, in the order the document gives them.
+      const buffers = [...new Set(d.scenes.flatMap((x) => Object.keys(x.buffers || {})))];
+      const sources = [["reference", "Reference"], ...buffers.map((b) => ["reference:" + b, "Reference · " + b + " buffer"]),
+        ...d.techniques.map((t) => [t.key, FBKSD.techniqueLabel(t)])];
       this.aSelect = h("select", { name: "a", onchange: (e) => this.set({ a: e.target.value }) });
       options(this.aSelect, sources, s.a);
       this.bSelect = h("select", { name: "b", onchange: (e) => this.set({ b: e.target.value }) });

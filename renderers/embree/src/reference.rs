@@ -8,11 +8,15 @@
 //! beside the mean pixel value to read it against. A cached reference is
 //! rebuilt when the renderer version, the spp or the scene's files change
 //! (the rule every renderer shares:
-//! [`fbksd_exchange::scenes::current_reference_note`]).
+//! [`fbksd_exchange::scenes::current_reference_note`]). Beside it go the
+//! scene's feature buffers (albedo, normal, depth), which the results
+//! viewer shows.
 
-use crate::render::render_image;
+use crate::render::{render_features, render_image};
 use anyhow::{bail, Context};
+use fbksd_core::Feature;
 pub use fbksd_exchange::scenes::{ReferenceMethod, SceneMeta};
+use fbksd_exchange::scenes::{FEATURE_BUFFERS, FEATURE_BUFFER_SPP};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -69,6 +73,10 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
     let digest = fbksd_exchange::scenes::scene_digest(&meta.scene_file())?;
     if !force {
         if let Some(text) = fbksd_exchange::scenes::current_reference_note(meta, &generator(), spp, &digest)? {
+            if FEATURE_BUFFERS.iter().any(|name| !meta.feature_buffer_file(name).is_file()) {
+                let scene = crate::pbrt::load(&meta.scene_file()).with_context(|| format!("loading {}", meta.name))?;
+                write_feature_buffers(meta, &scene)?;
+            }
             return Ok(serde_json::from_str(&text)?);
         }
     }
@@ -105,6 +113,24 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         generator: generator(),
         scene_digest: digest,
     };
+    write_feature_buffers(meta, &scene)?;
     std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
     Ok(note)
+}
+
+/// Writes the feature buffers of [`FEATURE_BUFFERS`] (the mean of
+/// [`FEATURE_BUFFER_SPP`] samples per pixel of the first hit's albedo,
+/// normal and depth; depth repeated in r, g and b).
+fn write_feature_buffers(meta: &SceneMeta, scene: &crate::scene::Scene) -> anyhow::Result<()> {
+    use Feature::*;
+    for name in FEATURE_BUFFERS {
+        let wanted = match name {
+            "albedo" => [(TextureColorR, 0), (TextureColorG, 0), (TextureColorB, 0)],
+            "normal" => [(NormalX, 0), (NormalY, 0), (NormalZ, 0)],
+            _ => [(Depth, 0); 3],
+        };
+        let image = render_features(scene, FEATURE_BUFFER_SPP, 1_000_003, wanted);
+        fbksd_iqa::image::write_exr(&meta.feature_buffer_file(name), scene.width(), scene.height(), &image)?;
+    }
+    Ok(())
 }

@@ -252,13 +252,32 @@ pub struct Rendered {
     pub all_finite: bool,
 }
 
+/// Renders the per-pixel box-filtered mean of three geometric features
+/// (first hit, as the protocol gives them) at `spp` stratified samples per
+/// pixel: the feature buffers made with a reference.
+pub fn render_features(scene: &Scene, spp: u64, request: u64, wanted: [(Feature, u8); 3]) -> Vec<f32> {
+    let geometry = Wanted { geometry: true, ..Wanted::default() };
+    pixel_means(scene, spp, request, &geometry, |v| wanted.map(|(f, n)| feature(v, f, n))).rgb
+}
+
 /// Renders the box-filtered colour image at `spp` stratified samples per
 /// pixel on the current rayon pool, accumulating in f64.
 pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Rendered {
+    let radiance = Wanted { radiance: true, ..Wanted::default() };
+    pixel_means(scene, spp, request, &radiance, |v| [v.color.x, v.color.y, v.color.z])
+}
+
+/// The per-pixel mean of three values of each sample, traced for `wanted`.
+fn pixel_means(
+    scene: &Scene,
+    spp: u64,
+    request: u64,
+    wanted: &Wanted,
+    values: impl Fn(&SampleValues) -> [f32; 3] + Sync,
+) -> Rendered {
     use rayon::prelude::*;
     let (w, h) = (scene.width() as usize, scene.height() as usize);
     let sampler = Sampler::new(scene.width(), scene.height(), request);
-    let wanted = Wanted { radiance: true, ..Wanted::default() };
     let needed = scene.used_parameters();
     let repairs = Repairs::default();
     let rays = AtomicU64::new(0);
@@ -271,13 +290,13 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Rendered {
             let mut sum = [0f64; 3];
             for s in 0..spp {
                 let p = sampler.pixel_sample(&pixel, &strata, s, needed);
-                let v = trace(scene, &position(&p), &Dimensions::of_pixel_sample(&pixel, s), &wanted);
+                let v = trace(scene, &position(&p), &Dimensions::of_pixel_sample(&pixel, s), wanted);
                 row_rays += v.rays as u64;
                 if v.repaired {
                     repairs.0.fetch_add(1, Ordering::Relaxed);
                 }
-                for (c, total) in sum.iter_mut().enumerate() {
-                    *total += v.color[c] as f64;
+                for (total, value) in sum.iter_mut().zip(values(&v)) {
+                    *total += value as f64;
                 }
             }
             for c in 0..3 {

@@ -46,6 +46,37 @@ fn depth_of_a_plane_is_its_distance_along_each_ray() {
 }
 
 #[test]
+fn a_feature_buffer_is_each_pixel_mean_of_the_feature_its_samples_give() {
+    // The buffers made with a reference: the same samples as the protocol's
+    // (request and stratification), averaged per pixel.
+    let text = header(9, 7, 60.0, 1)
+        + "Material \"diffuse\" \"rgb reflectance\" [0.2 0.4 0.6]\n\
+           Shape \"trianglemesh\" \"point3 P\" [-100 -100 5  100 -100 5  100 100 5  -100 100 5] \"integer indices\" [0 1 2 0 2 3]\n";
+    let scene = scene(&text, &[]).unwrap();
+    let l = layout(&["DEPTH", "TEXTURE_COLOR_G", "NORMAL_Z"]);
+    let (data, _) = samples(&scene, &l, 16, 7);
+    let depth = fbksd_embree::render::render_features(&scene, 16, 7, [(Feature::Depth, 0); 3]);
+    let albedo = fbksd_embree::render::render_features(
+        &scene,
+        16,
+        7,
+        [(Feature::TextureColorR, 0), (Feature::TextureColorG, 0), (Feature::TextureColorB, 0)],
+    );
+    let normal = fbksd_embree::render::render_features(
+        &scene,
+        16,
+        7,
+        [(Feature::NormalX, 0), (Feature::NormalY, 0), (Feature::NormalZ, 0)],
+    );
+    for (p, mean) in pixel_means(&scene, &data, &l, 16, 0).iter().enumerate() {
+        assert!((depth[p * 3] as f64 - mean).abs() < 1e-5 * mean, "pixel {p}: {} vs {mean}", depth[p * 3]);
+        assert_eq!((depth[p * 3], depth[p * 3]), (depth[p * 3 + 1], depth[p * 3 + 2]), "depth is grey");
+        assert_eq!(&albedo[p * 3..p * 3 + 3], &[0.2, 0.4, 0.6], "pixel {p}: the reflectance");
+        assert_eq!(&normal[p * 3..p * 3 + 3], &[0.0, 0.0, -1.0], "pixel {p}: towards the camera");
+    }
+}
+
+#[test]
 fn normals_of_a_sphere_point_from_its_centre_to_the_hit() {
     let text = header(16, 16, 40.0, 1) + "Translate 0 0 6\nShape \"sphere\" \"float radius\" 1.5\n";
     let scene = scene(&text, &[]).unwrap();

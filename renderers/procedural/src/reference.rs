@@ -12,11 +12,16 @@
 //! - `closed_form`: a formula known here by name, exact in every dimension
 //!   but the pixel area, which is integrated by midpoint quadrature; the note
 //!   gives the largest change between `q` and `2q` points per side.
+//!
+//! Beside it go the feature buffers the scene's program assigns (albedo,
+//! normal, depth), which the results viewer shows.
 
-use crate::render::render_image;
+use crate::render::{render_features, render_image};
 use crate::Scene;
 use anyhow::bail;
+use fbksd_core::Feature;
 pub use fbksd_exchange::scenes::{ReferenceMethod, SceneMeta};
+use fbksd_exchange::scenes::{FEATURE_BUFFERS, FEATURE_BUFFER_SPP};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::time::Instant;
@@ -80,6 +85,10 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         if let Some(text) =
             fbksd_exchange::scenes::current_reference_note(meta, &generator(), samples_per_pixel, &digest)?
         {
+            if feature_buffers_missing(meta) {
+                let scene = Scene::load(&meta.scene_file()).map_err(anyhow::Error::msg)?;
+                write_feature_buffers(meta, &scene)?;
+            }
             return Ok(serde_json::from_str(&text)?);
         }
     }
@@ -125,8 +134,48 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
         generator: generator(),
         scene_digest: digest,
     };
+    write_feature_buffers(meta, &scene)?;
     std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
     Ok(note)
+}
+
+/// The features of each buffer of [`fbksd_exchange::scenes::FEATURE_BUFFERS`]
+/// (depth repeated in r, g and b, so it shows grey).
+fn buffer_features(name: &str) -> [(Feature, u8); 3] {
+    match name {
+        "albedo" => [(Feature::TextureColorR, 0), (Feature::TextureColorG, 0), (Feature::TextureColorB, 0)],
+        "normal" => [(Feature::NormalX, 0), (Feature::NormalY, 0), (Feature::NormalZ, 0)],
+        _ => [(Feature::Depth, 0); 3],
+    }
+}
+
+/// Whether a buffer the scene's program assigns has no file yet (a
+/// reference cached before buffers were made).
+fn feature_buffers_missing(meta: &SceneMeta) -> bool {
+    FEATURE_BUFFERS.iter().any(|name| !meta.feature_buffer_file(name).is_file())
+        && Scene::load(&meta.scene_file()).is_ok_and(|scene| {
+            FEATURE_BUFFERS.iter().any(|name| {
+                !meta.feature_buffer_file(name).is_file()
+                    && buffer_features(name).iter().any(|(f, n)| scene.program.feature_slot(*f, *n).is_some())
+            })
+        })
+}
+
+/// Writes the feature buffers the scene's program assigns (mean of
+/// [`FEATURE_BUFFER_SPP`] samples per pixel) and removes any other left
+/// from an earlier version of the scene.
+fn write_feature_buffers(meta: &SceneMeta, scene: &Scene) -> anyhow::Result<()> {
+    for name in FEATURE_BUFFERS {
+        let file = meta.feature_buffer_file(name);
+        let wanted = buffer_features(name);
+        if !wanted.iter().any(|(f, n)| scene.program.feature_slot(*f, *n).is_some()) {
+            let _ = std::fs::remove_file(&file);
+            continue;
+        }
+        let image = render_features(scene, FEATURE_BUFFER_SPP, 1_000_003, &wanted).map_err(anyhow::Error::msg)?;
+        fbksd_iqa::image::write_exr(&file, scene.width, scene.height, &image)?;
+    }
+    Ok(())
 }
 
 /// A named closed form, integrated over each pixel by `q × q` midpoint

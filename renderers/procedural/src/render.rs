@@ -186,18 +186,25 @@ pub fn evaluate(scene: &Scene, program: &Program, eval: &Evaluation) -> Result<(
 /// Renders the box-filtered colour image at `spp` samples per pixel on the
 /// current rayon pool, accumulating in f64 (references, benchmarks).
 pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, String> {
+    render_features(scene, spp, request, &[(Feature::ColorR, 0), (Feature::ColorG, 0), (Feature::ColorB, 0)])
+}
+
+/// Renders the per-pixel box-filtered mean of each `wanted` feature at
+/// `spp` samples per pixel (`wanted.len()` values per pixel, 0 for a
+/// feature the scene never assigns).
+pub fn render_features(scene: &Scene, spp: u64, request: u64, wanted: &[(Feature, u8)]) -> Result<Vec<f32>, String> {
     use rayon::prelude::*;
-    let wanted = [(Feature::ColorR, 0), (Feature::ColorG, 0), (Feature::ColorB, 0)];
-    let program = scene.program.specialise(&wanted);
+    let program = scene.program.specialise(wanted);
     let slots: Vec<Option<usize>> = wanted.iter().map(|(f, n)| program.feature_slot(*f, *n)).collect();
     let sampler = Sampler::new(scene.width, scene.height, request);
     let needed = RandomParameter::ALL.iter().filter(|p| program.uses(**p)).fold(0u8, |m, p| m | 1 << p.index());
     let (w, h) = (scene.width as usize, scene.height as usize);
-    let mut image = vec![0f32; w * h * 3];
-    image.par_chunks_mut(w * 3).enumerate().try_for_each_init(
+    let channels = wanted.len();
+    let mut image = vec![0f32; w * h * channels];
+    image.par_chunks_mut(w * channels).enumerate().try_for_each_init(
         || Machine::new(&program),
         |machine, (y, row)| -> Result<(), String> {
-            let mut sums = vec![0f64; w * 3];
+            let mut sums = vec![0f64; w * channels];
             let mut params = [[0.0f64; 7]; LANES];
             let strata = Strata::new(spp);
             let mut pixel = sampler.pixel(0, y as u32);
@@ -214,7 +221,7 @@ pub fn render_image(scene: &Scene, spp: u64, request: u64) -> Result<Vec<f32>, S
                         pixel = sampler.pixel(x, y as u32);
                     }
                     *p = sampler.pixel_sample(&pixel, &strata, s, needed);
-                    *column = x as usize * 3;
+                    *column = x as usize * channels;
                     s += 1;
                 }
                 machine.run_samples(&params[..n]).map_err(|e| scene.runtime_error(e.pos, &e.message))?;

@@ -4,6 +4,9 @@
 //! Regression: a procedural reference was kept after its `.expr` changed
 //! (the Embree renderer rebuilt its own): a technique would have been
 //! scored against an image of another scene.
+//!
+//! The feature buffers the results viewer shows are made with the
+//! reference, from the features the scene's program assigns.
 
 use fbksd_procedural::reference::{build, SceneMeta};
 
@@ -50,4 +53,44 @@ fn a_changed_scene_file_or_budget_rebuilds_the_reference() {
 
     // Another budget: made again too.
     assert_eq!(build(&meta, false, Some(16)).unwrap().samples_per_pixel, 16);
+}
+
+#[test]
+fn the_features_a_scene_assigns_become_buffers_beside_its_reference() {
+    let dir = scene_copy();
+    let expr = dir.path().join("sin-bands.expr");
+    // Depth grows with x across each pixel's footprint: the buffer is its mean.
+    let text = std::fs::read_to_string(&expr).unwrap().replace("DEPTH := 1;", "DEPTH := 2 + IMAGE_X;");
+    std::fs::write(&expr, text).unwrap();
+    let meta = SceneMeta::load(dir.path()).unwrap();
+    build(&meta, false, Some(8)).unwrap();
+    let read = |name: &str| fbksd_iqa::image::Image::read(&meta.feature_buffer_file(name)).unwrap();
+
+    let albedo = read("albedo");
+    assert_eq!((albedo.width, albedo.height), (32, 16));
+    assert!(albedo.rgb.iter().all(|v| *v == 1.0), "TEXTURE_COLOR_* := 1 everywhere");
+    let normal = read("normal");
+    assert!(normal.rgb.chunks(3).all(|n| n == [0.0, 0.0, 1.0]), "NORMAL_Z := 1, x and y unassigned");
+    let depth = read("depth");
+    for x in 0..32usize {
+        let seen = depth.rgb[(5 * 32 + x) * 3];
+        // The mean of 2 + IMAGE_X over the pixel is 2.5 + x, within the stratification's error.
+        assert!((seen - (2.5 + x as f32)).abs() < 0.1, "depth at x = {x}: {seen}");
+    }
+    assert!(meta.feature_buffer_file("albedo").starts_with(dir.path()));
+    let digest = fbksd_exchange::scenes::scene_digest(&meta.scene_file()).unwrap();
+    assert_eq!(build(&meta, false, Some(8)).unwrap().scene_digest, digest, "the buffers are not part of the scene");
+
+    // A scene without features has no buffers, and loses those of its earlier version.
+    let plain: String = std::fs::read_to_string(&expr)
+        .unwrap()
+        .lines()
+        .filter(|l| !["TEXTURE_COLOR", "DEPTH", "NORMAL"].iter().any(|f| l.starts_with(f)))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&expr, plain).unwrap();
+    build(&meta, false, Some(8)).unwrap();
+    for name in fbksd_exchange::scenes::FEATURE_BUFFERS {
+        assert!(!meta.feature_buffer_file(name).exists(), "{name} left behind");
+    }
 }

@@ -14,7 +14,7 @@
 use anyhow::Context;
 use base64::Engine;
 use fbksd_exchange::results::{IndexEntry, ResultsDir, RunFiles};
-use fbksd_exchange::scenes::SceneMeta;
+use fbksd_exchange::scenes::{SceneMeta, FEATURE_BUFFERS};
 use fbksd_exchange::viewer::{Delivery, Rankings, ViewerData, ViewerRun, ViewerScene, ViewerTechnique, ASSETS};
 use fbksd_exchange::MetricInfo;
 use fbksd_iqa::image::Image;
@@ -59,10 +59,17 @@ pub fn write(results: &ResultsDir, scenes: &BTreeMap<String, SceneMeta>, out: &P
                 None
             }
         };
+        let mut buffers = BTreeMap::new();
+        for buffer in FEATURE_BUFFERS {
+            if let Some(path) = meta.map(|m| m.feature_buffer_file(buffer)).filter(|p| p.is_file()) {
+                buffers.insert(buffer.to_string(), page.pixels(&Image::read(&path)?.pixels_file())?);
+            }
+        }
         doc.scenes.push(ViewerScene {
             name: name.to_string(),
             tags: meta.map(|m| m.tags.clone()).unwrap_or_default(),
             reference,
+            buffers,
         });
     }
     let mut by_technique: BTreeMap<&str, Vec<&IndexEntry>> = BTreeMap::new();

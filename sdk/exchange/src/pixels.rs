@@ -34,6 +34,17 @@ pub fn uploaded_reference_name(reference_hash: &str) -> Option<String> {
     (hex.len() == 64 && hex.chars().all(|c| c.is_ascii_hexdigit())).then(|| format!("references/{hex}.{EXTENSION}"))
 }
 
+/// The name under which a runner uploads the pixel file of feature buffer
+/// `buffer` (one of [`crate::scenes::FEATURE_BUFFERS`]) made with reference
+/// `sha256:<hex>`: `references/<hex>.<buffer>.fbpx`.
+pub fn uploaded_reference_buffer_name(reference_hash: &str, buffer: &str) -> Option<String> {
+    if !crate::scenes::FEATURE_BUFFERS.contains(&buffer) {
+        return None;
+    }
+    let name = uploaded_reference_name(reference_hash)?;
+    Some(format!("{}.{buffer}.{EXTENSION}", name.strip_suffix(&format!(".{EXTENSION}"))?))
+}
+
 /// Pixel files larger than this are refused when read (64 Mpixel RGB).
 const MAX_FLOATS: usize = 3 << 26;
 
@@ -106,6 +117,17 @@ pub fn decode(file: &[u8]) -> Result<Pixels, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_buffer_is_stored_beside_its_reference_and_only_known_names_are() {
+        let hash = format!("sha256:{}", "ab".repeat(32));
+        let hex = "ab".repeat(32);
+        assert_eq!(uploaded_reference_name(&hash), Some(format!("references/{hex}.fbpx")));
+        assert_eq!(uploaded_reference_buffer_name(&hash, "albedo"), Some(format!("references/{hex}.albedo.fbpx")));
+        // A name from a request never becomes a path of its own.
+        assert_eq!(uploaded_reference_buffer_name(&hash, "../../etc"), None);
+        assert_eq!(uploaded_reference_buffer_name("sha256:12", "depth"), None);
+    }
 
     #[test]
     fn pixels_survive_the_round_trip_bit_for_bit() {

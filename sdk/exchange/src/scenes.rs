@@ -178,4 +178,23 @@ impl SceneMeta {
     pub fn reference_file(&self) -> PathBuf {
         self.dir.join(&self.ref_img)
     }
+
+    /// The feature buffer `name` (one of [`FEATURE_BUFFERS`]) made with the
+    /// reference: `reference-albedo.exr` beside `reference.exr`. Its name
+    /// starts like the reference's, so [`scene_digest`] leaves it out.
+    pub fn feature_buffer_file(&self, name: &str) -> PathBuf {
+        let reference = Path::new(&self.ref_img);
+        let stem = reference.file_stem().unwrap_or_default().to_string_lossy();
+        self.dir.join(reference.with_file_name(format!("{stem}-{name}.exr")))
+    }
 }
+
+/// The feature buffers a renderer makes beside a scene's reference, so a
+/// researcher sees what a feature-guided technique was given: the mean
+/// first-hit albedo (texture colour), the mean first-hit normal (x, y, z as
+/// r, g, b, in [-1, 1]) and the mean depth (the same in r, g and b).
+pub const FEATURE_BUFFERS: [&str; 3] = ["albedo", "normal", "depth"];
+
+/// Samples per pixel of the feature buffers: enough to average the pixel
+/// footprint (edges, lens and time), far below a reference's.
+pub const FEATURE_BUFFER_SPP: u64 = 16;

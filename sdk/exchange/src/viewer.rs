@@ -101,6 +101,10 @@ pub struct ViewerScene {
     pub tags: Vec<String>,
     /// The reference's pixel file, when known.
     pub reference: Option<String>,
+    /// The pixel files of the feature buffers made with the reference, by
+    /// name ([`crate::scenes::FEATURE_BUFFERS`]), those that exist.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub buffers: BTreeMap<String, String>,
 }
 
 /// A technique of the document.

@@ -72,6 +72,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/leaderboard", get(results::board))
         .route("/results/{id}/files/{*name}", get(results::file))
         .route("/results/{id}/references/{scene}", get(results::reference))
+        .route("/results/{id}/references/{scene}/{buffer}", get(results::reference_buffer))
         // Git, with personal access tokens (HTTP Basic password) or a job token.
         .route("/git/{repo}/{*rest}", any(projects::git))
         // Runners, with their runner token or a job token.
@@ -126,8 +127,24 @@ pub fn router(state: AppState) -> Router {
         .with_state(state)
         // A bug in one handler answers 500 instead of dropping the connection.
         .layer(tower_http::catch_panic::CatchPanicLayer::new())
+        // Pages, documents, scripts and styles gzipped when the browser
+        // accepts it. Pixel files and downloads are compressed already, git
+        // answers are packs, and live logs must not wait in a compressor.
+        .layer(tower_http::compression::CompressionLayer::new().compress_when(compressible()))
         // Outermost, so that every answer has them, errors and panics included.
         .layer(axum::middleware::map_response(limits::security_headers))
+}
+
+/// What [`router`] compresses: text answers (the default rule leaves out
+/// images, event streams and tiny bodies), not the files that are
+/// compressed already or git's packs.
+fn compressible() -> impl tower_http::compression::Predicate {
+    use tower_http::compression::predicate::{DefaultPredicate, NotForContentType, Predicate};
+    DefaultPredicate::new()
+        .and(NotForContentType::const_new("application/octet-stream"))
+        .and(NotForContentType::const_new("application/gzip"))
+        .and(NotForContentType::const_new("application/x-git"))
+        .and(NotForContentType::const_new("application/zip"))
 }
 
 /// The value of cookie `name` in the request.

@@ -168,3 +168,23 @@ pub async fn reference(
     let path = results::reference_pixels(&state.config.data_dir, &hash).ok_or_else(not_found)?;
     immutable("application/octet-stream", &path).await.ok_or_else(not_found)
 }
+
+/// `GET /results/{id}/references/{scene}/{buffer}`: the pixel file of a
+/// feature buffer (albedo, normal, depth) made with that reference.
+pub async fn reference_buffer(
+    State(state): State<AppState>,
+    MaybeUser(user): MaybeUser,
+    Path((id, scene, buffer)): Path<(String, String, String)>,
+) -> Result<Response, ApiError> {
+    let set = results::visible(&state.pool, &id, user.as_ref()).await?;
+    let not_found = || {
+        ApiError::new(
+            StatusCode::NOT_FOUND,
+            "not_found",
+            format!("no {buffer:?} buffer of scene {scene:?}'s reference in result set {id}"),
+        )
+    };
+    let hash = results::reference_hash(&state.pool, &set.id, &scene).await?.ok_or_else(not_found)?;
+    let path = results::reference_buffer_pixels(&state.config.data_dir, &hash, &buffer).ok_or_else(not_found)?;
+    immutable("application/octet-stream", &path).await.ok_or_else(not_found)
+}

@@ -10,7 +10,7 @@ use super::{JobCaller, RunnerCaller};
 use crate::routes::ApiError;
 use crate::AppState;
 use axum::body::Bytes;
-use axum::extract::{Path, State};
+use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
@@ -148,22 +148,44 @@ pub async fn put_file(
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// `GET /api/v1/jobs/{id}/references/{hash}`: 204 when the server already
-/// holds the pixel file of reference `hash` (`sha256:<hex>`), 404 when the
-/// runner should upload it with the job's files
-/// (`references/<hex>.fbpx`).
+/// `GET /api/v1/jobs/{id}/references/{hash}[?buffer=NAME]`: 204 when the
+/// server already holds the pixel file of reference `hash`
+/// (`sha256:<hex>`), or of the feature buffer `NAME` made with it; 404
+/// when the runner should upload it with the job's files
+/// (`references/<hex>.fbpx`, `references/<hex>.<NAME>.fbpx`).
 pub async fn has_reference(
     State(state): State<AppState>,
     _job: JobCaller,
     Path((_, hash)): Path<(String, String)>,
+    Query(query): Query<ReferenceQuery>,
 ) -> Result<StatusCode, ApiError> {
-    match crate::results::reference_pixels(&state.config.data_dir, &hash) {
+    let data_dir = &state.config.data_dir;
+    let path = match &query.buffer {
+        None => crate::results::reference_pixels(data_dir, &hash),
+        Some(buffer) => crate::results::reference_buffer_pixels(data_dir, &hash, buffer),
+    };
+    let what = query.buffer.as_ref().map_or(String::new(), |b| format!("{b} buffer of "));
+    match path {
         Some(path) if tokio::fs::try_exists(&path).await.unwrap_or(false) => Ok(StatusCode::NO_CONTENT),
         Some(_) => {
-            Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no reference {hash} yet: upload it")))
+            Err(ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no {what}reference {hash} yet: upload it")))
         }
-        None => Err(ApiError::bad_request("invalid_hash", format!("{hash:?} is not sha256:<64 hex digits>"))),
+        None => Err(ApiError::bad_request(
+            "invalid_reference",
+            format!(
+                "{hash:?} is not sha256:<64 hex digits>, or {:?} is not one of {:?}",
+                query.buffer.unwrap_or_default(),
+                fbksd_exchange::scenes::FEATURE_BUFFERS
+            ),
+        )),
     }
+}
+
+/// The query of [`has_reference`].
+#[derive(Debug, serde::Deserialize)]
+pub struct ReferenceQuery {
+    /// A feature buffer's name, to ask for it instead of the reference.
+    buffer: Option<String>,
 }
 
 /// `PUT /api/v1/jobs/{id}/results`: the results (checked now; stored

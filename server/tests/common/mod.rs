@@ -412,6 +412,13 @@ pub struct PicturedScene<'a> {
     pub reference_hash: &'a str,
 }
 
+/// The albedo buffer [`upload_pictured`] sends with scene `scene`'s
+/// reference: x / width in red, y / height in green, the scene's number
+/// over 4 in blue.
+pub fn albedo((w, h): (u32, u32), scene: usize) -> Vec<f32> {
+    (0..w * h).flat_map(|p| [(p % w) as f32 / w as f32, (p / w) as f32 / h as f32, scene as f32 / 4.0]).collect()
+}
+
 /// One technique's results with real pixel files, as the runner uploads
 /// them: per scene and spp the viewer's pixel file, the image, its record,
 /// the technique's log and an MSE error map; MSE and PSNR values.
@@ -476,6 +483,20 @@ pub async fn upload_pictured(runner: &FakeRunner, job: &HeldJob, p: &Pictured<'_
                 sent += 1;
             }
             other => panic!("asking for reference {hash}: {other}"),
+        }
+    }
+    // The albedo buffer made with each reference, also once per reference.
+    for (s, scene) in p.scenes.iter().enumerate() {
+        let hash = scene.reference_hash;
+        let path = format!("references/{hash}?buffer=albedo");
+        let held = runner.job_request(reqwest::Method::GET, &job.id, &job.token, &path).send().await;
+        match held.unwrap().status().as_u16() {
+            204 => {}
+            404 => {
+                let name = format!("references/{}.albedo.fbpx", hash.trim_start_matches("sha256:"));
+                put(name, fbksd_exchange::pixels::encode(w, h, 3, &albedo(p.size, s))).await;
+            }
+            other => panic!("asking for the albedo buffer of reference {hash}: {other}"),
         }
     }
     let upload = serde_json::json!({
