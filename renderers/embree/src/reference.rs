@@ -66,11 +66,7 @@ impl std::fmt::Display for ReferenceNote {
 pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
     let note_file = out.with_extension("json");
-    let ReferenceMethod::Render { spp } = meta.reference else {
-        bail!("{}: the Embree renderer makes references by rendering (\"method\": \"render\")", meta.name);
-    };
-    let spp = spp_override.unwrap_or(spp).max(2);
-    let digest = fbksd_exchange::scenes::scene_digest(&meta.scene_file())?;
+    let (spp, digest) = recipe(meta, spp_override)?;
     if !force {
         if let Some(text) = fbksd_exchange::scenes::current_reference_note(meta, &generator(), spp, &digest)? {
             if FEATURE_BUFFERS.iter().any(|name| !meta.feature_buffer_file(name).is_file()) {
@@ -116,6 +112,21 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
     write_feature_buffers(meta, &scene)?;
     std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
     Ok(note)
+}
+
+/// What a scene's reference is made with: samples per pixel and the scene digest.
+fn recipe(meta: &SceneMeta, spp_override: Option<u64>) -> anyhow::Result<(u64, String)> {
+    let ReferenceMethod::Render { spp } = meta.reference else {
+        bail!("{}: the Embree renderer makes references by rendering (\"method\": \"render\")", meta.name);
+    };
+    Ok((spp_override.unwrap_or(spp).max(2), fbksd_exchange::scenes::scene_digest(&meta.scene_file())?))
+}
+
+/// The key ([`fbksd_exchange::scenes::reference_key`]) of the reference
+/// [`build`] makes, without making it.
+pub fn key(meta: &SceneMeta, spp_override: Option<u64>) -> anyhow::Result<String> {
+    let (spp, digest) = recipe(meta, spp_override)?;
+    Ok(fbksd_exchange::scenes::reference_key(&generator(), spp, &digest))
 }
 
 /// Writes the feature buffers of [`FEATURE_BUFFERS`] (the mean of

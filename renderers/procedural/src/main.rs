@@ -38,6 +38,10 @@ enum Command {
         /// Rebuild even when a reference exists.
         #[arg(long)]
         force: bool,
+        /// Print each scene's reference key (what makes it, of which files)
+        /// instead of building anything.
+        #[arg(long, conflicts_with = "force")]
+        key: bool,
         /// Override the metadata's spp (for quick, unconverged references).
         #[arg(long)]
         spp: Option<u64>,
@@ -81,9 +85,13 @@ fn run() -> anyhow::Result<()> {
                 fbksd_iqa::image::write_exr(&out, scene.width, scene.height, &image)?;
             }
         }
-        (Some(Command::Reference { scenes, force, spp }), _) => {
+        (Some(Command::Reference { scenes, force, key, spp }), _) => {
             for dir in scenes {
                 let meta = reference::SceneMeta::load(&dir)?;
+                if key {
+                    println!("{} {}", reference::key(&meta, spp)?, dir.display());
+                    continue;
+                }
                 let note =
                     reference::build(&meta, force, spp).with_context(|| format!("reference of {}", meta.name))?;
                 println!("{}: {note}", meta.name);

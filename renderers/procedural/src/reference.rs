@@ -76,11 +76,7 @@ impl std::fmt::Display for ReferenceNote {
 pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
     let note_file = out.with_extension("json");
-    let samples_per_pixel = match &meta.reference {
-        ReferenceMethod::Render { spp } => spp_override.unwrap_or(*spp).max(2),
-        ReferenceMethod::ClosedForm { .. } => spp_override.unwrap_or(256),
-    };
-    let digest = fbksd_exchange::scenes::scene_digest(&meta.scene_file())?;
+    let (samples_per_pixel, digest) = recipe(meta, spp_override)?;
     if !force {
         if let Some(text) =
             fbksd_exchange::scenes::current_reference_note(meta, &generator(), samples_per_pixel, &digest)?
@@ -137,6 +133,23 @@ pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow
     write_feature_buffers(meta, &scene)?;
     std::fs::write(&note_file, serde_json::to_vec_pretty(&note)?)?;
     Ok(note)
+}
+
+/// What a scene's reference is made with: samples per pixel (quadrature
+/// points per side for a closed form) and the scene digest.
+fn recipe(meta: &SceneMeta, spp_override: Option<u64>) -> anyhow::Result<(u64, String)> {
+    let samples_per_pixel = match &meta.reference {
+        ReferenceMethod::Render { spp } => spp_override.unwrap_or(*spp).max(2),
+        ReferenceMethod::ClosedForm { .. } => spp_override.unwrap_or(256),
+    };
+    Ok((samples_per_pixel, fbksd_exchange::scenes::scene_digest(&meta.scene_file())?))
+}
+
+/// The key ([`fbksd_exchange::scenes::reference_key`]) of the reference
+/// [`build`] makes, without making it.
+pub fn key(meta: &SceneMeta, spp_override: Option<u64>) -> anyhow::Result<String> {
+    let (samples_per_pixel, digest) = recipe(meta, spp_override)?;
+    Ok(fbksd_exchange::scenes::reference_key(&generator(), samples_per_pixel, &digest))
 }
 
 /// The features of each buffer of [`fbksd_exchange::scenes::FEATURE_BUFFERS`]

@@ -8,7 +8,7 @@
 //! The feature buffers the results viewer shows are made with the
 //! reference, from the features the scene's program assigns.
 
-use fbksd_procedural::reference::{build, SceneMeta};
+use fbksd_procedural::reference::{build, key, SceneMeta};
 
 /// A copy of the sin-bands scene with a small image, without a reference.
 fn scene_copy() -> tempfile::TempDir {
@@ -93,4 +93,25 @@ fn the_features_a_scene_assigns_become_buffers_beside_its_reference() {
     for name in fbksd_exchange::scenes::FEATURE_BUFFERS {
         assert!(!meta.feature_buffer_file(name).exists(), "{name} left behind");
     }
+}
+
+#[test]
+fn a_reference_key_is_known_before_the_reference_and_names_what_was_built() {
+    let dir = scene_copy();
+    let meta = SceneMeta::load(dir.path()).unwrap();
+    let before = key(&meta, Some(8)).unwrap();
+    assert!(!meta.reference_file().exists(), "asking for the key builds nothing");
+    let note = build(&meta, false, Some(8)).unwrap();
+    let built = fbksd_exchange::scenes::reference_key(&note.generator, note.samples_per_pixel, &note.scene_digest);
+    assert_eq!(before, built, "the key is the one of the reference made");
+    assert_ne!(key(&meta, Some(16)).unwrap(), before, "another budget, another key");
+
+    // The program prints it too, one line per scene.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_fbksd-procedural"))
+        .args(["reference", "--key", "--spp", "8"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(String::from_utf8(out.stdout).unwrap(), format!("{before} {}\n", dir.path().display()));
 }

@@ -98,6 +98,17 @@ pub fn scene_digest(scene_file: &Path) -> std::io::Result<String> {
     Ok(format!("sha256:{:x}", hasher.finalize()))
 }
 
+/// A reference's key, `sha256:<hex>`: what makes it (a renderer's
+/// `generator`, which names its version), at how many samples per pixel,
+/// of which scene files ([`scene_digest`]). Every reference with one key is
+/// the same image, so the service needs one per key; a renderer prints a
+/// scene's key without building it (`fbksd-<renderer> reference --key`).
+pub fn reference_key(generator: &str, samples_per_pixel: u64, scene_digest: &str) -> String {
+    use sha2::{Digest, Sha256};
+    let text = format!("fbksd reference\n{generator}\n{samples_per_pixel}\n{scene_digest}\n");
+    format!("sha256:{:x}", Sha256::digest(text.as_bytes()))
+}
+
 /// The one rule for cached references, shared by every renderer: the
 /// reference beside a scene is kept when it and its note (`reference.json`)
 /// exist and the note names the same `generator`, `samples_per_pixel` and
@@ -198,3 +209,22 @@ pub const FEATURE_BUFFERS: [&str; 3] = ["albedo", "normal", "depth"];
 /// Samples per pixel of the feature buffers: enough to average the pixel
 /// footprint (edges, lens and time), far below a reference's.
 pub const FEATURE_BUFFER_SPP: u64 = 16;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_reference_key_changes_with_its_renderer_its_budget_and_its_scene() {
+        let key = reference_key("fbksd-embree 0.1.0, renderer 3", 4096, "sha256:aa");
+        assert!(key.starts_with("sha256:") && key.len() == 7 + 64, "{key}");
+        assert_eq!(key, reference_key("fbksd-embree 0.1.0, renderer 3", 4096, "sha256:aa"));
+        for other in [
+            reference_key("fbksd-embree 0.1.0, renderer 4", 4096, "sha256:aa"),
+            reference_key("fbksd-embree 0.1.0, renderer 3", 4095, "sha256:aa"),
+            reference_key("fbksd-embree 0.1.0, renderer 3", 4096, "sha256:ab"),
+        ] {
+            assert_ne!(key, other);
+        }
+    }
+}
