@@ -8,6 +8,10 @@
 //! costs one small query however many techniques are published, and every
 //! server instance sees every change.
 //!
+//! A board never mixes references: on each scene it ranks the runs scored
+//! against the reference of the newest set that ran there
+//! ([`one_reference_per_scene`]), and says how many it left out.
+//!
 //! Ranking is [`fbksd_exchange::ranking`]'s, twice: at equal samples per
 //! (scene, spp) group and at equal time (each technique's error read off
 //! its error-against-time curve at the fastest technique's time at each
@@ -113,6 +117,9 @@ pub struct Board {
     pub standings: Vec<Standing>,
     /// Groups by scene, then spp.
     pub groups: Vec<Group>,
+    /// Per scene whose runs were scored against different references: what
+    /// was left out ([`one_reference_per_scene`]).
+    pub left_out: Vec<String>,
 }
 
 /// What to show.
@@ -246,6 +253,52 @@ pub async fn build(
     }
 }
 
+/// The runs of `runs` scored against each scene's current reference: the
+/// one the newest set (of `sets`) that ran the scene was scored against, or
+/// on a private page (`page`) the page's own set's. Sets scored against
+/// another (an older renderer, other scene files) cannot be compared with
+/// it. Also returns a line per scene that lost runs.
+pub fn one_reference_per_scene<'a>(
+    sets: &[ResultSet],
+    runs: &'a [StoredRun],
+    page: Option<&str>,
+) -> (Vec<&'a StoredRun>, Vec<String>) {
+    let created: HashMap<&str, (bool, i64, &str)> =
+        sets.iter().map(|s| (s.id.as_str(), (page == Some(s.id.as_str()), s.created_at, s.id.as_str()))).collect();
+    let mut current: BTreeMap<&str, ((bool, i64, &str), &str)> = BTreeMap::new();
+    for run in runs {
+        let Some(&when) = created.get(run.result_id.as_str()) else { continue };
+        let newest = current.entry(&run.scene).or_insert((when, &run.reference_hash));
+        if when > newest.0 {
+            *newest = (when, &run.reference_hash);
+        }
+    }
+    let mut left: BTreeMap<&str, BTreeSet<&str>> = BTreeMap::new();
+    let kept = runs
+        .iter()
+        .filter(|r| {
+            let same = current.get(r.scene.as_str()).is_none_or(|(_, hash)| *hash == r.reference_hash);
+            if !same {
+                left.entry(&r.scene).or_default().insert(&r.result_id);
+            }
+            same
+        })
+        .collect();
+    let notes = left
+        .into_iter()
+        .map(|(scene, sets)| {
+            let hash = current[scene].1;
+            format!(
+                "{scene}: {} result set(s) scored against an earlier reference are left out; \
+                 this board ranks the runs scored against {}",
+                sets.len(),
+                &hash[..hash.len().min(19)]
+            )
+        })
+        .collect();
+    (kept, notes)
+}
+
 /// The pure part of [`build`].
 fn assemble(
     season: i64,
@@ -279,10 +332,11 @@ fn assemble(
         None => true,
     };
 
+    let (runs, left_out) = one_reference_per_scene(sets, runs, highlighted);
     // Every shown run as an index entry of its result set (techniques are
     // told apart by set id), its repeats summed up.
     let index: Vec<IndexEntry> = runs
-        .iter()
+        .into_iter()
         .filter(|r| shown(&r.scene) && technique_of.contains_key(r.result_id.as_str()))
         .map(|r| r.index_entry(&r.result_id))
         .collect();
@@ -374,7 +428,16 @@ fn assemble(
         .filter(|s| s.mean_rank.is_finite())
         .collect();
     let tags: BTreeSet<String> = scene_tags.values().flatten().cloned().collect();
-    Board { season, metrics, sort, tags: tags.into_iter().collect(), tag: query.tag.clone(), standings, groups }
+    Board {
+        season,
+        metrics,
+        sort,
+        tags: tags.into_iter().collect(),
+        tag: query.tag.clone(),
+        standings,
+        groups,
+        left_out,
+    }
 }
 
 #[cfg(test)]
@@ -435,6 +498,7 @@ mod tests {
             image: None,
             log: None,
             repeats: Vec::new(),
+            reference_hash: "sha256:current".into(),
         }
     }
 
@@ -513,6 +577,40 @@ mod tests {
         // at 40 ms its 4 spp (0.025) beats alpha's 16 spp (0.0625).
         assert_eq!(standing("gamma").mean_rank_time, (3.0 + 1.0) / 2.0);
         assert_eq!(standing("alpha").mean_rank_time, (1.5 + 2.5) / 2.0);
+    }
+
+    #[test]
+    fn a_board_ranks_each_scene_against_one_reference_and_says_what_it_left_out() {
+        let (mut old, mut new, other) = (set("old", "old-filter"), set("new", "new-filter"), set("other", "other"));
+        old.created_at = 1;
+        new.created_at = 2;
+        let against = |mut r: StoredRun, hash: &str| {
+            r.reference_hash = hash.into();
+            r
+        };
+        let runs = vec![
+            against(run("old", "sphere", Some(0.1), 0.5), "sha256:aaaa"),
+            against(run("new", "sphere", Some(0.2), 0.5), "sha256:bbbb"),
+            against(run("other", "sphere", Some(0.3), 0.5), "sha256:bbbb"),
+            // Another scene with one reference loses nothing.
+            against(run("old", "bands", Some(0.1), 0.5), "sha256:cccc"),
+            against(run("new", "bands", Some(0.2), 0.5), "sha256:cccc"),
+        ];
+        let sets = [old, new, other];
+        let board = assemble(1, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
+        let on = |board: &Board, scene: &str| -> Vec<String> {
+            let group = board.groups.iter().find(|g| g.scene == scene).unwrap();
+            group.entries.iter().map(|e| e.technique.clone()).collect()
+        };
+        assert_eq!(on(&board, "sphere"), ["new-filter", "other"], "the newest set's reference");
+        assert_eq!(on(&board, "bands"), ["old-filter", "new-filter"]);
+        assert_eq!(board.left_out.len(), 1, "{:?}", board.left_out);
+        assert!(board.left_out[0].starts_with("sphere: 1 result set(s)"), "{:?}", board.left_out);
+
+        // A private page ranks against its own set's references.
+        let page = assemble(1, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), Some("old"));
+        assert_eq!(on(&page, "sphere"), ["old-filter"]);
+        assert!(page.left_out[0].starts_with("sphere: 2 result set(s)"), "{:?}", page.left_out);
     }
 
     #[test]

@@ -148,6 +148,8 @@ pub struct StoredRun {
     pub log: Option<String>,
     /// Its repeats, one per sample seed (empty for runs stored before repeats).
     pub repeats: Vec<Repeat>,
+    /// The reference it was scored against (`sha256:<hex>` of its image).
+    pub reference_hash: String,
 }
 
 const SET_COLUMNS: &str = "r.id, r.technique, p.name AS project_name, p.id AS project_id, r.user_id, r.info, \
@@ -249,7 +251,10 @@ impl Selection<'_> {
 pub async fn runs(pool: &AnyPool, which: Selection<'_>) -> Result<Vec<StoredRun>, sqlx::Error> {
     let sql = format!(
         "SELECT result_id, scene, spp, status, message, technique_ms, render_ms, wall_ms, cpu_ms, peak_memory_bytes, \
-         used_samples, metric_values, image, log, repeats FROM result_runs WHERE {} ORDER BY result_id, scene, spp",
+         used_samples, metric_values, image, log, repeats, \
+         COALESCE((SELECT s.reference_hash FROM result_scenes s \
+         WHERE s.result_id = result_runs.result_id AND s.scene = result_runs.scene), '') AS reference_hash \
+         FROM result_runs WHERE {} ORDER BY result_id, scene, spp",
         which.condition()
     );
     let rows = which.bind(sqlx::query(&sql)).fetch_all(pool).await?;
@@ -275,6 +280,7 @@ pub async fn runs(pool: &AnyPool, which: Selection<'_>) -> Result<Vec<StoredRun>
                     .try_get::<Option<String>, _>("repeats")?
                     .and_then(|json| serde_json::from_str(&json).ok())
                     .unwrap_or_default(),
+                reference_hash: r.try_get("reference_hash")?,
             })
         })
         .collect()

@@ -25,6 +25,9 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
     runs.extend(
         results::runs(pool, Selection::Published(set.season)).await?.into_iter().filter(|r| r.result_id != set.id),
     );
+    // Only runs scored against the references this set was scored against.
+    let runs: Vec<StoredRun> =
+        crate::leaderboard::one_reference_per_scene(&sets, &runs, Some(&set.id)).0.into_iter().cloned().collect();
     let mut tags = BTreeMap::new();
     results::scene_tags(pool, Selection::One(&set.id), &mut tags).await?;
 

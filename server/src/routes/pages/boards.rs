@@ -68,6 +68,8 @@ struct BoardPage {
     tag_query: String,
     standings: Vec<StandingView>,
     groups: Vec<GroupView>,
+    /// Scenes whose runs against an earlier reference were left out.
+    left_out: Vec<String>,
     /// Shown on the public board while it is empty.
     how_to: Option<HowTo>,
     /// What the service still prepares (home page only).
@@ -183,6 +185,7 @@ async fn board_page(
         tag,
         standings,
         groups,
+        left_out: board.left_out.clone(),
         viewer_tags: fbksd_exchange::viewer::asset_tags("/static/viewer/"),
     };
     Ok(render(&page))
