@@ -15,7 +15,9 @@ APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3
     # viewer), driven over WebDriver.
     chromium chromium-driver
     # fbksd-ci's base image is built from Debian packages (no registry).
-    mmdebstrap)
+    mmdebstrap
+    # deploy/compose.yaml (server, PostgreSQL and runners) and its check.
+    docker-compose)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -54,6 +56,13 @@ if ! python3 -c "import numpy, scipy, OpenEXR, pyoidn, skimage, flip_evaluator, 
     # are test tools only, so allow it there.
     python3 -m pip install --quiet --disable-pip-version-check "${PIP_PACKAGES[@]}" \
         || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages "${PIP_PACKAGES[@]}"
+fi
+
+# The Kubernetes manifests (deploy/k8s) are validated offline, against the
+# API schemas this package bundles.
+if ! python3 -c "import kubernetes_validate" >/dev/null 2>&1; then
+    python3 -m pip install --quiet --disable-pip-version-check kubernetes-validate \
+        || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages kubernetes-validate
 fi
 
 # The test command checks formatting and lints first.

@@ -1,0 +1,103 @@
+#!/usr/bin/env bash
+# Builds the images of the service itself, with no registry, on top of the
+# job images of deploy/build-images.sh (run first, with the same binaries):
+#   server    fbksd-server, git, the PostgreSQL client (backups), curl
+#   runner    fbksd-ci, the renderers, git, the scene files (no references)
+#             and the job images' manifest
+#   postgres  PostgreSQL from Debian's packages
+# all FROM the same Debian base. Each tag is a hash of the image's content
+# (its Dockerfile, the files it copies and its base), so an unchanged image
+# is never rebuilt. The tags are printed, and written as variables for
+# `docker-compose --env-file` (FBKSD_IMAGE_SERVER, FBKSD_IMAGE_RUNNER,
+# FBKSD_IMAGE_POSTGRES; see deploy/compose.yaml).
+#
+#   bash deploy/build-service-images.sh [--bin-dir DIR] [--manifest FILE] [--env-file FILE]
+#
+# --bin-dir and --manifest are build-images.sh's (the job images' manifest,
+# baked into the runner image). Without --bin-dir the release binaries are
+# built first (target/release).
+set -euo pipefail
+caller=$(pwd)
+absolute() { case "$1" in /*) echo "$1" ;; *) echo "$caller/$1" ;; esac; }
+cd "$(dirname "$0")/.."
+bin_dir=""
+manifest=$(pwd)/fbksd-data/images.json
+env_file=""
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --bin-dir) bin_dir=$(absolute "$2"); shift 2 ;;
+        --manifest) manifest=$(absolute "$2"); shift 2 ;;
+        --env-file) env_file=$(absolute "$2"); shift 2 ;;
+        *) echo "usage: build-service-images.sh [--bin-dir DIR] [--manifest FILE] [--env-file FILE]" >&2; exit 2 ;;
+    esac
+done
+say() { echo "build-service-images: $*" >&2; }
+if [ -z "$bin_dir" ]; then
+    cargo build --release --locked -p fbksd-server -p fbksd-ci -p fbksd-capi -p fbksd-python \
+        -p fbksd-procedural -p fbksd-embree
+    bin_dir=$(pwd)/target/release
+fi
+for f in fbksd-server fbksd-ci fbksd-procedural fbksd-embree; do
+    [ -f "$bin_dir/$f" ] || { say "$bin_dir/$f is missing: build the workspace first (cargo build)"; exit 1; }
+done
+
+# The job images and the base, from the same binaries.
+bash deploy/build-images.sh --bin-dir "$bin_dir" --manifest "$manifest"
+base=$(sed -n 's/.*"base": *"\([^"]*\)".*/\1/p' "$manifest")
+[ -n "$base" ] || { say "no base image in $manifest"; exit 1; }
+base_id=$(docker image inspect --format '{{.Id}}' "$base")
+
+stage=$(mktemp -d)
+trap 'rm -rf "$stage"' EXIT
+
+stage_server() {
+    mkdir -p "$1/bin"
+    cp "$bin_dir/fbksd-server" "$1/bin/"
+    cp deploy/images/server/entrypoint.sh "$1/"
+}
+stage_runner() {
+    mkdir -p "$1/bin" "$1/scenes"
+    cp "$bin_dir/fbksd-ci" "$bin_dir/fbksd-procedural" "$bin_dir/fbksd-embree" "$1/bin/"
+    cp deploy/images/runner/entrypoint.sh "$1/"
+    cp "$manifest" "$1/images.json"
+    # As the renderer image holds them: no references (the runner makes or fetches them).
+    (cd scenes && find . -type f ! -name 'reference.*' ! -name 'reference-*' ! -name '*.py' ! -name '*.md' -print0 \
+        | xargs -0 cp --parents -t "$1/scenes")
+}
+stage_postgres() {
+    cp deploy/images/postgres/entrypoint.sh "$1/"
+}
+
+declare -A tags
+for name in server runner postgres; do
+    ctx="$stage/$name"
+    mkdir -p "$ctx"
+    cp "deploy/images/$name/Dockerfile" "$ctx/"
+    "stage_$name" "$ctx"
+    # Modes too: an entrypoint that lost its execute bit is another image.
+    hash=$( (echo "$base_id"; cd "$ctx" && find . -type f -print0 | sort -z | xargs -0 sha256sum \
+        && find . -type f -printf '%m %p\n' | sort) | sha256sum | cut -c1-16)
+    tag=fbksd-$name:$hash
+    if ! docker image inspect "$tag" >/dev/null 2>&1; then
+        say "building $tag"
+        started=$SECONDS
+        if ! docker build --quiet --network host --build-arg "BASE=$base" -t "$tag" "$ctx" >"$stage/$name.log" 2>&1; then
+            cat "$stage/$name.log" >&2
+            say "building $tag failed"
+            exit 1
+        fi
+        say "built $tag in $((SECONDS - started)) s ($(docker image inspect --format '{{.Size}}' "$tag" | awk '{printf "%.0f MB", $1 / 1e6}'))"
+    fi
+    tags[$name]=$tag
+done
+
+variables="FBKSD_IMAGE_SERVER=${tags[server]}
+FBKSD_IMAGE_RUNNER=${tags[runner]}
+FBKSD_IMAGE_POSTGRES=${tags[postgres]}"
+if [ -n "$env_file" ]; then
+    mkdir -p "$(dirname "$env_file")"
+    echo "$variables" >"$env_file.tmp"
+    mv "$env_file.tmp" "$env_file"
+fi
+echo "$variables"
+say "service images ready: ${tags[server]} ${tags[runner]} ${tags[postgres]}${env_file:+ (written to $env_file)}"
