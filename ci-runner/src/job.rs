@@ -753,17 +753,13 @@ async fn references_to_upload(
     claim: &Claim,
     results: &Path,
 ) -> Result<Vec<(String, PathBuf)>, Failure> {
-    use fbksd_exchange::pixels::{uploaded_reference_buffer_name, uploaded_reference_name};
     let mut out = Vec::new();
     for scene in ctx.scenes.iter() {
         let hash = &scene.reference_hash;
         let buffers = fbksd_exchange::scenes::FEATURE_BUFFERS.iter().map(|b| Some(*b));
         for buffer in std::iter::once(None).chain(buffers) {
-            let (name, source) = match buffer {
-                None => (uploaded_reference_name(hash), scene.meta.reference_file()),
-                Some(b) => (uploaded_reference_buffer_name(hash, b), scene.meta.feature_buffer_file(b)),
-            };
-            let Some(name) = name else { continue };
+            let Some(name) = fbksd_exchange::pixels::uploaded_reference_name(hash, buffer) else { continue };
+            let source = buffer.map_or_else(|| scene.meta.reference_file(), |b| scene.meta.feature_buffer_file(b));
             if (buffer.is_some() && !source.is_file()) || ctx.api.has_reference(claim, hash, buffer).await? {
                 continue;
             }

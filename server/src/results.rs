@@ -542,21 +542,16 @@ pub async fn seasons(pool: &AnyPool) -> Result<Vec<(i64, String, i64)>, sqlx::Er
     rows.iter().map(|r| Ok((r.try_get("number")?, r.try_get("note")?, r.try_get("started_at")?))).collect()
 }
 
-/// Where the references' pixel files live: one per reference digest,
-/// shared by every set scored against it (`references/<hex>.fbpx`, the
-/// name a runner uploads it under).
-pub fn reference_pixels(data_dir: &std::path::Path, reference_hash: &str) -> Option<std::path::PathBuf> {
-    fbksd_exchange::pixels::uploaded_reference_name(reference_hash).map(|name| data_dir.join(name))
-}
-
-/// Where the pixel file of feature buffer `buffer` made with a reference
-/// lives (`references/<hex>.<buffer>.fbpx`), beside the reference's.
-pub fn reference_buffer_pixels(
+/// Where the pixel files of references (or, with `buffer`, of a feature
+/// buffer made with one) live: one per reference digest, shared by every
+/// set scored against it, under the name a runner uploads it with
+/// ([`fbksd_exchange::pixels::uploaded_reference_name`]).
+pub fn reference_pixels(
     data_dir: &std::path::Path,
     reference_hash: &str,
-    buffer: &str,
+    buffer: Option<&str>,
 ) -> Option<std::path::PathBuf> {
-    fbksd_exchange::pixels::uploaded_reference_buffer_name(reference_hash, buffer).map(|name| data_dir.join(name))
+    fbksd_exchange::pixels::uploaded_reference_name(reference_hash, buffer).map(|name| data_dir.join(name))
 }
 
 /// Moves the references (and their feature buffers) a job uploaded among a
@@ -571,17 +566,10 @@ pub async fn keep_references(data_dir: &std::path::Path, set_dir: &std::path::Pa
         files.extend(fbksd_exchange::scenes::FEATURE_BUFFERS.iter().map(|b| (scene.reference_hash.as_str(), Some(*b))));
     }
     for (hash, buffer) in files {
-        let (name, store) = match buffer {
-            None => (fbksd_exchange::pixels::uploaded_reference_name(hash), reference_pixels(data_dir, hash)),
-            Some(b) => (
-                fbksd_exchange::pixels::uploaded_reference_buffer_name(hash, b),
-                reference_buffer_pixels(data_dir, hash, b),
-            ),
-        };
-        let (Some(name), Some(store)) = (name, store) else {
+        let Some(name) = fbksd_exchange::pixels::uploaded_reference_name(hash, buffer) else {
             continue;
         };
-        let staged = set_dir.join(name);
+        let (staged, store) = (set_dir.join(&name), data_dir.join(&name));
         if staged.is_file() && !store.is_file() {
             if let Some(parent) = store.parent() {
                 let _ = tokio::fs::create_dir_all(parent).await;

@@ -38,14 +38,14 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
         let hash = results::reference_hash(pool, &set.id, name).await?;
         let stored = |path: Option<std::path::PathBuf>| path.is_some_and(|p| p.is_file());
         let reference = match &hash {
-            Some(hash) if stored(results::reference_pixels(data_dir, hash)) => {
+            Some(hash) if stored(results::reference_pixels(data_dir, hash, None)) => {
                 Some(format!("/results/{}/references/{name}", set.id))
             }
             _ => None,
         };
         let buffers = FEATURE_BUFFERS
             .iter()
-            .filter(|b| hash.as_ref().is_some_and(|h| stored(results::reference_buffer_pixels(data_dir, h, b))))
+            .filter(|b| hash.as_ref().is_some_and(|h| stored(results::reference_pixels(data_dir, h, Some(b)))))
             .map(|b| (b.to_string(), format!("/results/{}/references/{name}/{b}", set.id)))
             .collect();
         doc.scenes.push(ViewerScene { name: name.clone(), tags: tags.iter().cloned().collect(), reference, buffers });

@@ -98,6 +98,13 @@ fn srgb_byte(v: f32) -> u8 {
     (fbksd_iqa::image::srgb(v) * 255.0 + 0.5) as u8
 }
 
+/// The colour pixel `(x, y)` of an image of this test is given on screen
+/// at +1 EV in sRGB.
+fn at_plus_one(pixels: &[f32], (x, y): (u32, u32)) -> [u8; 3] {
+    let k = ((y * W + x) * 3) as usize;
+    [0, 1, 2].map(|c| srgb_byte(2.0 * pixels[k + c]))
+}
+
 /// The colour on screen at a viewport point.
 fn seen(shot: &image::RgbaImage, x: f64, y: f64) -> [u8; 3] {
     let p = shot.get_pixel(x as u32, y as u32).0;
@@ -227,9 +234,7 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
                 let scale = crop["scale"].as_f64().unwrap();
                 let (x, y) = (crop["x"].as_f64().unwrap() + 16.5 * scale, crop["y"].as_f64().unwrap() + 16.5 * scale);
                 let pixels = if i == 0 { reference(0) } else { result(0, i - 1, 4) };
-                let k = ((expected.1 * W + expected.0) * 3) as usize;
-                let want: Vec<u8> = (0..3).map(|c| srgb_byte(2.0 * pixels[k + c])).collect();
-                assert_eq!(seen(&shot, x, y).to_vec(), want, "crop {i} at {expected:?}");
+                assert_eq!(seen(&shot, x, y), at_plus_one(&pixels, expected), "crop {i} at {expected:?}");
             }
         }
     };
@@ -269,9 +274,8 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
         let right = sx > split_x;
         sides[right as usize] += 1;
         let pixels = if right { reference(0) } else { result(0, 0, 4) };
-        let k = ((py * W + x) * 3) as usize;
-        let want: Vec<u8> = (0..3).map(|c| srgb_byte(2.0 * pixels[k + c])).collect();
-        assert_eq!(seen(&shot, sx, sy).to_vec(), want, "split view at pixel ({x}, {py}), right of the line: {right}");
+        let want = at_plus_one(&pixels, (x, py));
+        assert_eq!(seen(&shot, sx, sy), want, "split view at pixel ({x}, {py}), right of the line: {right}");
     }
     assert!(sides[0] > 0 && sides[1] > 0, "pixels on both sides of the split: {sides:?}");
     let sin_bands = doc["scenes"].as_array().unwrap().iter().find(|s| s["name"] == "sin-bands").unwrap().clone();
@@ -285,9 +289,8 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
         )
         .await;
     let (sx, sy) = centre(&browser.eval(&format!("return FBKSD.viewer.comparison.screenOf({px}, {py});")).await);
-    let k = ((py * W + px) * 3) as usize;
-    let want: Vec<u8> = (0..3).map(|c| srgb_byte(2.0 * reference(0)[k + c])).collect();
-    assert_eq!(seen(&browser.screenshot().await, sx, sy).to_vec(), want, "flipped to the reference");
+    let want = at_plus_one(&reference(0), (px, py));
+    assert_eq!(seen(&browser.screenshot().await, sx, sy), want, "flipped to the reference");
     browser.press("f").await;
     browser
         .wait_for(
@@ -321,9 +324,8 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
             Duration::from_secs(5),
         )
         .await;
-    let albedo = common::albedo((W, H), 0);
-    let want: Vec<u8> = (0..3).map(|c| srgb_byte(2.0 * albedo[k + c])).collect();
-    assert_eq!(seen(&browser.screenshot().await, sx, sy).to_vec(), want, "the albedo buffer at ({px}, {py})");
+    let want = at_plus_one(&common::albedo((W, H), 0), (px, py));
+    assert_eq!(seen(&browser.screenshot().await, sx, sy), want, "the albedo buffer at ({px}, {py})");
     browser.select("#fbksd-viewer select[name=a]", adas).await;
 
     // One chart line per technique; its SVG export opens as an image.

@@ -27,22 +27,21 @@ pub const VERSION: u32 = 1;
 pub const EXTENSION: &str = "fbpx";
 const HEADER_BYTES: usize = 20;
 
-/// The name under which a runner uploads the pixel file of reference
-/// `sha256:<hex>` with a job's files, when the server lacks it.
-pub fn uploaded_reference_name(reference_hash: &str) -> Option<String> {
+/// The name under which a runner uploads, with a job's files, the pixel
+/// file of reference `sha256:<hex>` (`references/<hex>.fbpx`) or of a
+/// feature buffer made with it (`buffer`, one of
+/// [`crate::scenes::FEATURE_BUFFERS`]: `references/<hex>.<buffer>.fbpx`),
+/// when the server lacks it; the server keeps it under the same name.
+pub fn uploaded_reference_name(reference_hash: &str, buffer: Option<&str>) -> Option<String> {
     let hex = reference_hash.strip_prefix("sha256:")?;
-    (hex.len() == 64 && hex.chars().all(|c| c.is_ascii_hexdigit())).then(|| format!("references/{hex}.{EXTENSION}"))
-}
-
-/// The name under which a runner uploads the pixel file of feature buffer
-/// `buffer` (one of [`crate::scenes::FEATURE_BUFFERS`]) made with reference
-/// `sha256:<hex>`: `references/<hex>.<buffer>.fbpx`.
-pub fn uploaded_reference_buffer_name(reference_hash: &str, buffer: &str) -> Option<String> {
-    if !crate::scenes::FEATURE_BUFFERS.contains(&buffer) {
+    if hex.len() != 64 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
         return None;
     }
-    let name = uploaded_reference_name(reference_hash)?;
-    Some(format!("{}.{buffer}.{EXTENSION}", name.strip_suffix(&format!(".{EXTENSION}"))?))
+    match buffer {
+        None => Some(format!("references/{hex}.{EXTENSION}")),
+        Some(b) if crate::scenes::FEATURE_BUFFERS.contains(&b) => Some(format!("references/{hex}.{b}.{EXTENSION}")),
+        Some(_) => None,
+    }
 }
 
 /// Pixel files larger than this are refused when read (64 Mpixel RGB).
@@ -122,11 +121,11 @@ mod tests {
     fn a_buffer_is_stored_beside_its_reference_and_only_known_names_are() {
         let hash = format!("sha256:{}", "ab".repeat(32));
         let hex = "ab".repeat(32);
-        assert_eq!(uploaded_reference_name(&hash), Some(format!("references/{hex}.fbpx")));
-        assert_eq!(uploaded_reference_buffer_name(&hash, "albedo"), Some(format!("references/{hex}.albedo.fbpx")));
+        assert_eq!(uploaded_reference_name(&hash, None), Some(format!("references/{hex}.fbpx")));
+        assert_eq!(uploaded_reference_name(&hash, Some("albedo")), Some(format!("references/{hex}.albedo.fbpx")));
         // A name from a request never becomes a path of its own.
-        assert_eq!(uploaded_reference_buffer_name(&hash, "../../etc"), None);
-        assert_eq!(uploaded_reference_buffer_name("sha256:12", "depth"), None);
+        assert_eq!(uploaded_reference_name(&hash, Some("../../etc")), None);
+        assert_eq!(uploaded_reference_name("sha256:12", Some("depth")), None);
     }
 
     #[test]

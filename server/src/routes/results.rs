@@ -160,13 +160,7 @@ pub async fn reference(
     MaybeUser(user): MaybeUser,
     Path((id, scene)): Path<(String, String)>,
 ) -> Result<Response, ApiError> {
-    let set = results::visible(&state.pool, &id, user.as_ref()).await?;
-    let not_found = || {
-        ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no reference of scene {scene:?} in result set {id}"))
-    };
-    let hash = results::reference_hash(&state.pool, &set.id, &scene).await?.ok_or_else(not_found)?;
-    let path = results::reference_pixels(&state.config.data_dir, &hash).ok_or_else(not_found)?;
-    immutable("application/octet-stream", &path).await.ok_or_else(not_found)
+    reference_file(&state, user.as_ref(), &id, &scene, None).await
 }
 
 /// `GET /results/{id}/references/{scene}/{buffer}`: the pixel file of a
@@ -176,15 +170,24 @@ pub async fn reference_buffer(
     MaybeUser(user): MaybeUser,
     Path((id, scene, buffer)): Path<(String, String, String)>,
 ) -> Result<Response, ApiError> {
-    let set = results::visible(&state.pool, &id, user.as_ref()).await?;
+    reference_file(&state, user.as_ref(), &id, &scene, Some(&buffer)).await
+}
+
+/// The pixel file of the reference (or of one of its feature buffers) that
+/// set `id`'s scene was scored against, for whoever may see the set.
+async fn reference_file(
+    state: &AppState,
+    user: Option<&crate::accounts::User>,
+    id: &str,
+    scene: &str,
+    buffer: Option<&str>,
+) -> Result<Response, ApiError> {
+    let set = results::visible(&state.pool, id, user).await?;
     let not_found = || {
-        ApiError::new(
-            StatusCode::NOT_FOUND,
-            "not_found",
-            format!("no {buffer:?} buffer of scene {scene:?}'s reference in result set {id}"),
-        )
+        let what = buffer.map_or("reference".to_string(), |b| format!("{b:?} buffer of the reference"));
+        ApiError::new(StatusCode::NOT_FOUND, "not_found", format!("no {what} of scene {scene:?} in result set {id}"))
     };
-    let hash = results::reference_hash(&state.pool, &set.id, &scene).await?.ok_or_else(not_found)?;
-    let path = results::reference_buffer_pixels(&state.config.data_dir, &hash, &buffer).ok_or_else(not_found)?;
+    let hash = results::reference_hash(&state.pool, &set.id, scene).await?.ok_or_else(not_found)?;
+    let path = results::reference_pixels(&state.config.data_dir, &hash, buffer).ok_or_else(not_found)?;
     immutable("application/octet-stream", &path).await.ok_or_else(not_found)
 }

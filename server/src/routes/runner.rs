@@ -159,11 +159,7 @@ pub async fn has_reference(
     Path((_, hash)): Path<(String, String)>,
     Query(query): Query<ReferenceQuery>,
 ) -> Result<StatusCode, ApiError> {
-    let data_dir = &state.config.data_dir;
-    let path = match &query.buffer {
-        None => crate::results::reference_pixels(data_dir, &hash),
-        Some(buffer) => crate::results::reference_buffer_pixels(data_dir, &hash, buffer),
-    };
+    let path = crate::results::reference_pixels(&state.config.data_dir, &hash, query.buffer.as_deref());
     let what = query.buffer.as_ref().map_or(String::new(), |b| format!("{b} buffer of "));
     match path {
         Some(path) if tokio::fs::try_exists(&path).await.unwrap_or(false) => Ok(StatusCode::NO_CONTENT),
