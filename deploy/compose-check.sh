@@ -2,16 +2,19 @@
 # Brings deploy/compose.yaml up on this machine and checks it end to end,
 # through real git, real HTTP and the host's Docker engine:
 #  1. secrets generated (files), images built (content-tagged, cached);
-#  2. PostgreSQL, the server and 2 runners up; a user registered (the
-#     verification link from the server's file outbox), a project made;
+#  2. PostgreSQL, the server and 2 runners up, the scene's reference made
+#     once (by one runner, as the service's reference job) and downloaded
+#     by the other; a user registered (the verification link from the
+#     server's file outbox), a project made;
 #  3. the C++ box filter pushed twice with FBKSD_RUN: each runner does one
 #     job; the first result set is published; the board read;
 #  4. pushed again, and the runner holding that job stopped (docker stop)
 #     mid-job: the server requeues the lost lease and the other runner
 #     finishes it; the board read again, identical;
 #  5. with no runner running and a job waiting, `up --scale runner=3` adds
-#     a runner, which takes the job (the time from the command to its first
-#     claim is printed); then all three run;
+#     a runner, which downloads the reference instead of making it and takes
+#     the job (the time from the command to its first claim is printed,
+#     beside the time the reference took to make); then all three run;
 #  6. everything torn down (`down -v`, the runners' directories), also on
 #     failure, which prints the services' last log lines first
 #     (FBKSD_COMPOSE_KEEP=1 keeps the work directory with their whole logs).
@@ -208,6 +211,22 @@ api GET /readyz >/dev/null || fail "the server is not ready at $url"
 timing "up to the server ready: $(seconds_since "$step") s"
 wait_runners_ready 2 300
 timing "up to 2 runners ready: $(seconds_since "$step") s"
+# The scene's reference: made by one runner, downloaded by the other.
+made=0 downloaded=0 reference_s=
+for c in $(runner_containers); do
+    made=$((made + $(docker logs "$c" 2>&1 | grep -c 'making reference' || true)))
+    downloaded=$((downloaded + $(docker logs "$c" 2>&1 | grep -c 'reference of .* downloaded' || true)))
+    # From "making reference" to its job's end, by the log's own timestamps.
+    reference_s=${reference_s:-$(docker logs --timestamps "$c" 2>&1 | python3 -c '
+import sys, datetime
+t = lambda line: datetime.datetime.fromisoformat(line.split()[0][:26])
+lines = sys.stdin.read().splitlines()
+start = next((t(l) for l in lines if "making reference" in l), None)
+end = start and next((t(l) for l in lines if t(l) >= start and " finished" in l and "job " in l), None)
+print("%.1f" % (end - start).total_seconds() if end else "")')}
+done
+[ "$made $downloaded" = "1 1" ] || fail "the reference was made $made times and downloaded $downloaded times (expected once each)"
+timing "making the scene's reference (the reference job, on one runner): ${reference_s:-?} s"
 
 # A user: registered, verified through the link of the mail in the file
 # outbox (the server prints its links too), logged in, with an access token.
@@ -316,8 +335,9 @@ added=$(comm -13 <(echo "$before") <(runner_containers | sort))
 docker start "$added" >/dev/null
 wait_runners_ready 1 600
 added_id=$(runner_id_of "$added")
-made=$(docker logs "$added" 2>&1 | grep -c 'making reference')
-timing "up --scale runner=3 to the added runner ready (registered; $made reference(s) made itself): $(seconds_since "$step") s"
+made=$(docker logs "$added" 2>&1 | grep -c 'making reference' || true)
+[ "$made" = 0 ] || fail "the added runner made the reference again instead of downloading it"
+timing "up --scale runner=3 to the added runner ready (registered, reference downloaded): $(seconds_since "$step") s"
 for _ in $(seq 240); do
     [ -n "$(job "$job4" | json 'd["started_at"] or ""')" ] && break
     sleep 0.5

@@ -8,7 +8,8 @@
 //! requeued after a lost lease): the runner stops working on it.
 
 use fbksd_exchange::runner_api::{
-    Claim, ClaimRequest, Finished, Outcome, Registration, RunnerCredentials, StatusReport, Upload,
+    Claim, ClaimRequest, Finished, Outcome, ReferenceRequest, ReferenceStatus, Registration, RunnerCredentials,
+    StatusReport, Upload,
 };
 use std::time::Duration;
 
@@ -109,18 +110,44 @@ impl Api {
         response.json().await.map_err(|e| unreadable("registration", e))
     }
 
-    /// Asks for a job, waiting up to `wait_seconds` on the server; `None` when none came.
-    pub async fn claim(&self, runner_token: &str, wait_seconds: u64) -> Result<Option<Claim>, ApiError> {
-        let body = ClaimRequest { wait_seconds };
+    /// Asks for a job as `request` says; `None` when none came.
+    pub async fn claim(&self, runner_token: &str, request: &ClaimRequest) -> Result<Option<Claim>, ApiError> {
         let response = self
             .send("a claim", Duration::from_secs(30), || {
-                self.http.post(self.url("runners/jobs")).bearer_auth(runner_token).json(&body)
+                self.http.post(self.url("runners/jobs")).bearer_auth(runner_token).json(request)
             })
             .await?;
         if response.status() == reqwest::StatusCode::NO_CONTENT {
             return Ok(None);
         }
         response.json().await.map(Some).map_err(|e| unreadable("a claim", e))
+    }
+
+    /// Asks for a reference this runner lacks: where it is on the service
+    /// (asking queues a reference job when none is stored or building).
+    pub async fn request_reference(
+        &self,
+        runner_token: &str,
+        request: &ReferenceRequest,
+    ) -> Result<ReferenceStatus, ApiError> {
+        let what = format!("the reference of {}", request.scene);
+        let response = self
+            .send(&what, JOB_PATIENCE, || {
+                self.http.post(self.url("runners/references")).bearer_auth(runner_token).json(request)
+            })
+            .await?;
+        response.json().await.map_err(|e| unreadable(&what, e))
+    }
+
+    /// Downloads the file `name` of the stored reference `key`.
+    pub async fn reference_file(&self, runner_token: &str, key: &str, name: &str) -> Result<Vec<u8>, ApiError> {
+        let what = format!("{name} of reference {key}");
+        let response = self
+            .send(&what, JOB_PATIENCE, || {
+                self.http.get(self.url(&format!("runners/references/{key}/files/{name}"))).bearer_auth(runner_token)
+            })
+            .await?;
+        Ok(response.bytes().await.map_err(|e| unreadable(&what, e))?.to_vec())
     }
 
     /// Says what the runner prepares before it takes jobs (`None`: ready);

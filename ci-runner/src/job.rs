@@ -43,11 +43,11 @@ pub struct Failure {
 }
 
 impl Failure {
-    fn new(reason: FailureReason, message: impl Into<String>) -> Failure {
+    pub(crate) fn new(reason: FailureReason, message: impl Into<String>) -> Failure {
         Failure { reason, message: message.into() }
     }
 
-    fn infrastructure(message: impl Into<String>) -> Failure {
+    pub(crate) fn infrastructure(message: impl Into<String>) -> Failure {
         Failure::new(FailureReason::InfrastructureError, message)
     }
 }

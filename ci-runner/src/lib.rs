@@ -15,7 +15,9 @@
 //! - [`config`]: the runner's settings (command line or environment).
 //! - [`api`]: the server's runner API, with retries across server restarts.
 //! - [`images`]: the image manifest written by `deploy/build-images.sh`.
-//! - [`pool`]: the scene pool, its references and hashes.
+//! - [`pool`]: the scene pool and its hashes.
+//! - [`references`]: the pool's references, made once for the whole service
+//!   (reference jobs) and downloaded by every other runner.
 //! - [`sandbox`]: the container limits every piece of user code runs under.
 //! - [`launcher`]: the manager's processes as sandboxed containers.
 //! - [`job`]: one job, from clone to finish, with typed failure reasons.
@@ -29,6 +31,7 @@ pub mod job;
 pub mod launcher;
 pub mod machine;
 pub mod pool;
+pub mod references;
 pub mod runner;
 pub mod sandbox;
 

@@ -1,7 +1,7 @@
 //! The runner's scene pool: the scenes it benchmarks on, with their
-//! references and feature buffers, made where missing ([`make_missing_references`], with the
-//! renderer programs next to the runner or on PATH; the server is told of
-//! the progress) and checked and hashed once when the runner starts.
+//! references and feature buffers (made present by
+//! [`crate::references::prepare`]), checked and hashed once when the runner
+//! starts.
 //!
 //! The renderer image holds the scene root at [`SCENES_MOUNT`] without
 //! references; the references stay on the runner's machine, where the
@@ -34,72 +34,6 @@ impl PoolScene {
         let file = Path::new(SCENES_MOUNT).join(&self.rel).join(&self.meta.path);
         vec![format!("fbksd-{}", self.meta.renderer), normalize(&file).display().to_string()]
     }
-}
-
-/// Makes the references of the scenes `dirs` (relative to `root`) that
-/// have none, one after another, telling the server which one and at what
-/// budget every few seconds (it shows this while jobs wait).
-pub async fn make_missing_references(
-    root: &Path,
-    dirs: &[String],
-    api: &crate::api::Api,
-    runner_token: &str,
-) -> anyhow::Result<()> {
-    let mut missing = Vec::new();
-    let mut kept = Vec::new();
-    for rel in dirs {
-        let meta = SceneMeta::load(&root.join(rel)).map_err(|e| anyhow::anyhow!("scene pool: {e}"))?;
-        if meta.reference_file().is_file() {
-            kept.push((rel, meta));
-        } else {
-            missing.push((rel, meta));
-        }
-    }
-    // A kept reference is still handed to its renderer, which keeps it when
-    // it is current and makes only the feature buffers it lacks.
-    for (rel, meta) in &kept {
-        let program = fbksd_exchange::scenes::renderer_program(&meta.renderer)
-            .map_err(|e| anyhow::anyhow!("scene pool: the reference of {rel}: {e}"))?;
-        let exit = tokio::process::Command::new(&program).arg("reference").arg(root.join(rel)).status().await?;
-        if !exit.success() {
-            anyhow::bail!("scene pool: {} reference {} failed ({exit})", program.display(), root.join(rel).display());
-        }
-    }
-    for (i, (rel, meta)) in missing.iter().enumerate() {
-        let budget = match &meta.reference {
-            fbksd_exchange::scenes::ReferenceMethod::Render { spp } => format!("{spp} spp"),
-            fbksd_exchange::scenes::ReferenceMethod::ClosedForm { formula } => format!("closed form {formula}"),
-        };
-        let status = format!(
-            "making reference {} of {}: {rel} ({}×{}, {budget})",
-            i + 1,
-            missing.len(),
-            meta.width,
-            meta.height
-        );
-        tracing::info!("{status}");
-        let program = fbksd_exchange::scenes::renderer_program(&meta.renderer)
-            .map_err(|e| anyhow::anyhow!("scene pool: the reference of {rel}: {e}"))?;
-        let mut child = tokio::process::Command::new(&program)
-            .arg("reference")
-            .arg(root.join(rel))
-            .kill_on_drop(true)
-            .spawn()
-            .map_err(|e| anyhow::anyhow!("scene pool: {}: {e}", program.display()))?;
-        let exit = loop {
-            if let Err(e) = api.status(runner_token, Some(&status)).await {
-                tracing::warn!("telling the server what this runner prepares: {e}");
-            }
-            tokio::select! {
-                exit = child.wait() => break exit?,
-                () = tokio::time::sleep(std::time::Duration::from_secs(5)) => {}
-            }
-        };
-        if !exit.success() {
-            anyhow::bail!("scene pool: {} reference {} failed ({exit})", program.display(), root.join(rel).display());
-        }
-    }
-    Ok(())
 }
 
 /// Loads and hashes the scenes `dirs` (relative to `root`); each must have its reference.

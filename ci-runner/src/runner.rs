@@ -21,8 +21,7 @@ use crate::machine::Machine;
 use crate::sandbox::Sandbox;
 use crate::RunnerConfig;
 use bollard::Docker;
-use fbksd_exchange::runner_api::Outcome;
-use fbksd_exchange::runner_api::{Claim, RunnerCredentials};
+use fbksd_exchange::runner_api::{Claim, ClaimRequest, JobKind, Outcome, RunnerCredentials};
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -34,6 +33,8 @@ use std::time::Duration;
 pub struct Runner {
     ctx: JobContext,
     credentials: RunnerCredentials,
+    /// The scenes' reference keys: this runner makes (or uploads) those references for the service.
+    references: Vec<crate::references::SceneReference>,
 }
 
 /// Connects to Docker (as `DOCKER_HOST` says, or the local socket) and
@@ -76,11 +77,13 @@ impl Runner {
         // Registered first, so the server can show what is being prepared.
         let credentials = identity(&config, &api, &machine).await?;
         let scene_dirs = config.scene_dirs()?;
-        let prepared = crate::pool::make_missing_references(&config.scene_root, &scene_dirs, &api, &credentials.token)
-            .await
-            .and_then(|()| crate::pool::load(&config.scene_root, &scene_dirs));
-        let scenes = match prepared {
-            Ok(scenes) => scenes,
+        let prepared = async {
+            let references = crate::references::keys(&config.scene_root, &scene_dirs).await?;
+            crate::references::prepare(&config.scene_root, &references, &api, &credentials.token).await?;
+            Ok::<_, anyhow::Error>((crate::pool::load(&config.scene_root, &scene_dirs)?, references))
+        };
+        let (scenes, references) = match prepared.await {
+            Ok(prepared) => prepared,
             Err(e) => {
                 let _ = api.status(&credentials.token, Some(&format!("stopped: {e}"))).await;
                 return Err(e);
@@ -123,6 +126,7 @@ impl Runner {
         Ok(Runner {
             ctx: JobContext { config, api, sandbox, images, machine, scenes, runner, rendezvous_parent },
             credentials,
+            references,
         })
     }
 
@@ -142,9 +146,14 @@ impl Runner {
                     _ = tokio::time::sleep(Duration::from_secs(5)) => continue,
                 }
             }
+            let request = ClaimRequest {
+                wait_seconds: self.ctx.config.poll_seconds,
+                reference_keys: self.references.iter().map(|s| s.key.clone()).collect(),
+                references_only: false,
+            };
             let claimed = tokio::select! {
                 _ = &mut shutdown => break,
-                c = self.ctx.api.claim(&self.credentials.token, self.ctx.config.poll_seconds) => c,
+                c = self.ctx.api.claim(&self.credentials.token, &request) => c,
             };
             match claimed {
                 Ok(Some(claim)) => {
@@ -167,83 +176,24 @@ impl Runner {
         tracing::info!("runner stopped ({removed} containers removed)");
     }
 
-    /// Runs one claimed job with heartbeats and a streaming log, reports
-    /// its end, and cleans up after it.
+    /// Runs one claimed job ([`drive`]) and cleans up after it.
     async fn handle(&self, claim: &Claim) {
         let ctx = &self.ctx;
         let log = JobLog::default();
         let cancelled = Arc::new(AtomicBool::new(false));
         let dir = ctx.config.work_dir.join("jobs").join(&claim.job.id);
         tracing::info!("job {} ({} of {}) claimed", claim.job.id, claim.job.kind, claim.job.project);
-        let beat = Duration::from_secs((claim.lease_seconds / 3).max(1));
-        let keepalive = async {
-            let mut tick = tokio::time::interval(beat.min(Duration::from_secs(1)));
-            let mut since_beat = Duration::ZERO;
-            loop {
-                tick.tick().await;
-                since_beat += beat.min(Duration::from_secs(1));
-                let _ = log.flush(&ctx.api, claim).await;
-                if since_beat >= beat {
-                    since_beat = Duration::ZERO;
-                    if let Err(crate::api::ApiError::JobGone) = ctx.api.heartbeat(claim).await {
-                        return;
-                    }
+        let work = async {
+            match claim.job.kind {
+                JobKind::Reference => {
+                    let root = &ctx.config.scene_root;
+                    crate::references::make_and_upload(&ctx.api, claim, root, &self.references, &log, None).await
                 }
+                _ => job::run(ctx, claim, &dir, &log, &cancelled).await,
             }
         };
-        let outcome = tokio::select! {
-            outcome = job::run(ctx, claim, &dir, &log, &cancelled) => Some(outcome),
-            () = keepalive => None,
-        };
-        let Some(outcome) = outcome else {
+        if !drive(&ctx.api, claim, &log, work).await {
             cancelled.store(true, Ordering::SeqCst);
-            let removed = ctx.sandbox.remove_job_containers(&claim.job.id).await;
-            tracing::warn!("job {} is no longer this runner's: stopped ({removed} containers removed)", claim.job.id);
-            remove_job_dir(&ctx.sandbox, &ctx.images, &dir).await;
-            return;
-        };
-        let body = match &outcome {
-            Ok(message) => {
-                log.line(format!("[fbksd-ci] succeeded: {message}"));
-                Outcome::succeeded(message.clone())
-            }
-            Err(Failure { reason, message }) => {
-                log.line(format!("[fbksd-ci] failed ({}): {message}", reason.as_str()));
-                Outcome::failed(*reason, message.clone())
-            }
-        };
-        // Reporting may wait out a server restart (JOB_PATIENCE): the lease
-        // is kept meanwhile, or the job would be requeued and run again.
-        let report = async {
-            if let Err(e) = log.flush(&ctx.api, claim).await {
-                tracing::warn!("job {}: the log's end was not sent: {e}", claim.job.id);
-            }
-            ctx.api.finish(claim, &body).await
-        };
-        let heartbeats = async {
-            loop {
-                tokio::time::sleep(beat).await;
-                if let Err(crate::api::ApiError::JobGone) = ctx.api.heartbeat(claim).await {
-                    return;
-                }
-            }
-        };
-        let finished = tokio::select! {
-            finished = report => finished,
-            () = heartbeats => Err(crate::api::ApiError::JobGone),
-        };
-        match finished {
-            Ok(url) => {
-                tracing::info!("job {} finished{}", claim.job.id, url.map(|u| format!(": {u}")).unwrap_or_default())
-            }
-            // Cancelled (or requeued) while it ran: the server already ended it.
-            Err(crate::api::ApiError::JobGone) => {
-                tracing::info!(
-                    "job {} ended on the server first (cancelled or requeued): {body:?} not recorded",
-                    claim.job.id
-                )
-            }
-            Err(e) => tracing::error!("job {}: reporting its end failed: {e}", claim.job.id),
         }
         let left = ctx.sandbox.remove_job_containers(&claim.job.id).await;
         if left > 0 {
@@ -251,6 +201,83 @@ impl Runner {
         }
         remove_job_dir(&ctx.sandbox, &ctx.images, &dir).await;
     }
+}
+
+/// Runs `work` for a claimed job with heartbeats and a streaming log, and
+/// reports its end; false when the job stopped being this runner's first
+/// (cancelled or requeued: `work` is dropped, and its end not reported).
+pub(crate) async fn drive(
+    api: &Api,
+    claim: &Claim,
+    log: &JobLog,
+    work: impl std::future::Future<Output = Result<String, Failure>>,
+) -> bool {
+    let beat = Duration::from_secs((claim.lease_seconds / 3).max(1));
+    let keepalive = async {
+        let mut tick = tokio::time::interval(beat.min(Duration::from_secs(1)));
+        let mut since_beat = Duration::ZERO;
+        loop {
+            tick.tick().await;
+            since_beat += beat.min(Duration::from_secs(1));
+            let _ = log.flush(api, claim).await;
+            if since_beat >= beat {
+                since_beat = Duration::ZERO;
+                if let Err(crate::api::ApiError::JobGone) = api.heartbeat(claim).await {
+                    return;
+                }
+            }
+        }
+    };
+    let outcome = tokio::select! {
+        outcome = work => Some(outcome),
+        () = keepalive => None,
+    };
+    let Some(outcome) = outcome else {
+        tracing::warn!("job {} is no longer this runner's: stopped", claim.job.id);
+        return false;
+    };
+    let body = match &outcome {
+        Ok(message) => {
+            log.line(format!("[fbksd-ci] succeeded: {message}"));
+            Outcome::succeeded(message.clone())
+        }
+        Err(Failure { reason, message }) => {
+            log.line(format!("[fbksd-ci] failed ({}): {message}", reason.as_str()));
+            Outcome::failed(*reason, message.clone())
+        }
+    };
+    // Reporting may wait out a server restart (JOB_PATIENCE): the lease
+    // is kept meanwhile, or the job would be requeued and run again.
+    let report = async {
+        if let Err(e) = log.flush(api, claim).await {
+            tracing::warn!("job {}: the log's end was not sent: {e}", claim.job.id);
+        }
+        api.finish(claim, &body).await
+    };
+    let heartbeats = async {
+        loop {
+            tokio::time::sleep(beat).await;
+            if let Err(crate::api::ApiError::JobGone) = api.heartbeat(claim).await {
+                return;
+            }
+        }
+    };
+    let finished = tokio::select! {
+        finished = report => finished,
+        () = heartbeats => Err(crate::api::ApiError::JobGone),
+    };
+    match finished {
+        Ok(url) => tracing::info!("job {} finished{}", claim.job.id, url.map(|u| format!(": {u}")).unwrap_or_default()),
+        // Cancelled (or requeued) while it ran: the server already ended it.
+        Err(crate::api::ApiError::JobGone) => {
+            tracing::info!(
+                "job {} ended on the server first (cancelled or requeued): {body:?} not recorded",
+                claim.job.id
+            )
+        }
+        Err(e) => tracing::error!("job {}: reporting its end failed: {e}", claim.job.id),
+    }
+    true
 }
 
 /// Removes a job's directory. A runner that is not root cannot remove what

@@ -217,3 +217,89 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
     let jobs_dir = runner.work.join("jobs");
     assert_eq!(std::fs::read_dir(&jobs_dir).unwrap().count(), 0, "job files left in {}", jobs_dir.display());
 }
+
+/// A copy of the scene `rel` under `root`, without its reference files.
+fn scene_copy(root: &std::path::Path, rel: &str) {
+    let (from, to) = (workspace().join("scenes").join(rel), root.join(rel));
+    std::fs::create_dir_all(&to).unwrap();
+    for entry in std::fs::read_dir(&from).unwrap().flatten() {
+        let name = entry.file_name();
+        if entry.path().is_file() && !name.to_string_lossy().starts_with("reference") {
+            std::fs::copy(entry.path(), to.join(&name)).unwrap();
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_missing_reference_is_made_once_and_both_runners_score_against_it() {
+    images();
+    let server = spawn(Db::Postgres).await;
+    let work = tempfile::tempdir().unwrap();
+    // Two machines, each with the scene and without its reference.
+    let runners: Vec<RunnerProcess> = ["a", "b"]
+        .into_iter()
+        .map(|name| {
+            let root = work.path().join(format!("scenes-{name}"));
+            scene_copy(&root, "experimental/sphere");
+            let options =
+                RunnerOptions { scenes: &["experimental/sphere"], scene_root: Some(root), ..Default::default() };
+            RunnerProcess::start(&server.url, &work.path().join(format!("runner-{name}")), &options)
+        })
+        .collect();
+    for runner in &runners {
+        runner.wait_for_output(" ready: 1 scenes", Duration::from_secs(300));
+    }
+
+    // One runner made it as the service's one reference job; the other downloaded it.
+    let admin = server.admin().await;
+    let (status, jobs) =
+        json_of(admin.api(Method::GET, format!("{}/api/v1/admin/jobs", server.url)).send().await.unwrap()).await;
+    assert_eq!(status, 200, "{jobs}");
+    let reference_jobs: Vec<_> = jobs.as_array().unwrap().iter().filter(|j| j["kind"] == "reference").collect();
+    assert_eq!(reference_jobs.len(), 1, "{jobs}");
+    assert_eq!(reference_jobs[0]["state"], "succeeded", "{}", reference_jobs[0]);
+    let outputs: Vec<String> = runners.iter().map(RunnerProcess::output).collect();
+    let made = outputs.iter().filter(|o| o.contains("making reference 1 of 1: experimental/sphere")).count();
+    let downloaded = outputs.iter().filter(|o| o.contains("reference of experimental/sphere downloaded")).count();
+    assert_eq!((made, downloaded), (1, 1), "{outputs:#?}");
+    let [a, b] = ["a", "b"].map(|name| {
+        std::fs::read(work.path().join(format!("scenes-{name}/experimental/sphere/reference.exr"))).unwrap()
+    });
+    assert!(a == b, "the two runners hold different references");
+    let digest = format!("sha256:{:x}", <sha2::Sha256 as sha2::Digest>::digest(&a));
+
+    // A benchmark on each runner: both scored against that one reference.
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "box", "private").await;
+    let repo = technique_repository("box-filter-cpp");
+    let url = server.clone_url("box", &ada.token);
+    let mut jobs = Vec::new();
+    for round in 0..2 {
+        if round > 0 {
+            commit_all(repo.path(), "again");
+        }
+        let (pushed, output) = push(repo.path(), &url, &["FBKSD_RUN"]);
+        assert!(pushed, "{output}");
+        let id = newest_job(&server, &ada, "box", "benchmark").await;
+        // The second push waits until the first job is taken, so the idle runner takes it.
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while job(&server, &ada, &id).await["state"] == "queued" {
+            assert!(Instant::now() < deadline, "nobody took {id}");
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+        jobs.push(id);
+    }
+    let mut by = Vec::new();
+    for id in &jobs {
+        let job = finished_job(&server, &ada, id, Duration::from_secs(600)).await;
+        assert_eq!(job["state"], "succeeded", "{job}\n{}", log_text(&server, &ada, id).await);
+        by.push(job["runner_id"].as_str().unwrap().to_string());
+        let set = job["result_id"].as_str().unwrap();
+        let (_, set) =
+            json_of(ada.api(Method::GET, format!("{}/api/v1/results/{set}", server.url)).send().await.unwrap()).await;
+        for run in set["runs"].as_array().unwrap() {
+            assert_eq!(run["reference_hash"], digest.as_str(), "{run}");
+        }
+    }
+    assert_ne!(by[0], by[1], "each runner was to do one job");
+}

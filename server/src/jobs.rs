@@ -61,6 +61,8 @@ pub struct Job {
     pub finished_at: Option<i64>,
     /// The result set it produced (benchmarks).
     pub result_id: Option<String>,
+    /// The reference it makes (reference jobs).
+    pub reference_key: Option<String>,
 }
 
 impl Job {
@@ -82,7 +84,7 @@ pub fn hide_result(text: &str, id: &str) -> String {
 
 const JOB_COLUMNS: &str = "j.id, j.pipeline_id, j.project_id, p.name AS project_name, j.user_id, j.kind, j.state, \
      j.failure_reason, j.message, j.attempts, j.max_attempts, j.runner_id, pl.commit_sha, j.season, j.created_at, \
-     j.started_at, j.finished_at, r.id AS result_id";
+     j.started_at, j.finished_at, r.id AS result_id, j.reference_key";
 const JOB_FROM: &str = "jobs j JOIN projects p ON p.id = j.project_id JOIN pipelines pl ON pl.id = j.pipeline_id \
      LEFT JOIN result_sets r ON r.job_id = j.id";
 
@@ -106,6 +108,7 @@ fn job_of(row: &sqlx::any::AnyRow) -> Result<Job, sqlx::Error> {
         started_at: row.try_get("started_at")?,
         finished_at: row.try_get("finished_at")?,
         result_id: row.try_get("result_id")?,
+        reference_key: row.try_get("reference_key")?,
     })
 }
 
@@ -172,25 +175,62 @@ pub async fn claim(
     runner_id: &str,
     lease_ms: i64,
 ) -> Result<Option<Claimed>, sqlx::Error> {
-    let token = format!("{JOB_TOKEN_PREFIX}{}", crate::accounts::random_token());
-    let now = now_ms();
-    let lock = if postgres { " FOR UPDATE OF j SKIP LOCKED" } else { "" };
-    let row = sqlx::query(&format!(
-        "UPDATE jobs SET state = 'running', runner_id = $1, token_hash = $2, lease_expires_at = $3, \
-         attempts = attempts + 1, started_at = COALESCE(started_at, $4) \
-         WHERE state = 'queued' AND id = (SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
-         WHERE j.state = 'queued' AND j.kind <> 'publish' \
+    let pick = "SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
+         WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark') \
          ORDER BY u.is_service, \
          (SELECT COUNT(*) FROM jobs r WHERE r.user_id = j.user_id AND r.state = 'running'), \
          (SELECT COALESCE(MAX(r.started_at), 0) FROM jobs r WHERE r.user_id = j.user_id), \
-         j.created_at, j.id LIMIT 1{lock}) RETURNING id"
-    ))
-    .bind(runner_id)
-    .bind(crate::accounts::digest(&token))
-    .bind(now + lease_ms)
-    .bind(now)
-    .fetch_optional(pool)
-    .await?;
+         j.created_at, j.id LIMIT 1";
+    claim_picked(pool, postgres, runner_id, lease_ms, pick, &[]).await
+}
+
+/// Hands the oldest queued reference job of one of `keys` (the scenes the
+/// runner has) to `runner_id`, if any. Runners ask for these before any
+/// other job: every benchmark waits for its references.
+pub async fn claim_reference(
+    pool: &AnyPool,
+    postgres: bool,
+    runner_id: &str,
+    lease_ms: i64,
+    keys: &[String],
+) -> Result<Option<Claimed>, sqlx::Error> {
+    if keys.is_empty() {
+        return Ok(None);
+    }
+    // $1..$4 are the claim's own parameters.
+    let list = (0..keys.len()).map(|i| format!("${}", i + 5)).collect::<Vec<_>>().join(", ");
+    let pick = format!(
+        "SELECT j.id FROM jobs j WHERE j.state = 'queued' AND j.kind = 'reference' \
+         AND j.reference_key IN ({list}) ORDER BY j.created_at, j.id LIMIT 1"
+    );
+    claim_picked(pool, postgres, runner_id, lease_ms, &pick, keys).await
+}
+
+/// Sets the job `pick` selects (a query of one `j.id`, whose parameters
+/// `extra` follow the claim's four) running for `runner_id`, with a new
+/// token and lease.
+async fn claim_picked(
+    pool: &AnyPool,
+    postgres: bool,
+    runner_id: &str,
+    lease_ms: i64,
+    pick: &str,
+    extra: &[String],
+) -> Result<Option<Claimed>, sqlx::Error> {
+    let token = format!("{JOB_TOKEN_PREFIX}{}", crate::accounts::random_token());
+    let now = now_ms();
+    let lock = if postgres { " FOR UPDATE OF j SKIP LOCKED" } else { "" };
+    let sql = format!(
+        "UPDATE jobs SET state = 'running', runner_id = $1, token_hash = $2, lease_expires_at = $3, \
+         attempts = attempts + 1, started_at = COALESCE(started_at, $4) \
+         WHERE state = 'queued' AND id = ({pick}{lock}) RETURNING id"
+    );
+    let mut query =
+        sqlx::query(&sql).bind(runner_id).bind(crate::accounts::digest(&token)).bind(now + lease_ms).bind(now);
+    for value in extra {
+        query = query.bind(value);
+    }
+    let row = query.fetch_optional(pool).await?;
     let Some(row) = row else { return Ok(None) };
     let id: String = row.try_get("id")?;
     let job = get(pool, &id).await?.ok_or(sqlx::Error::RowNotFound)?;
@@ -397,14 +437,16 @@ pub struct NewJob<'a> {
     pub counts_for_quota: bool,
     /// When it ended, if it already has.
     pub finished_at: Option<i64>,
+    /// The reference it makes (reference jobs).
+    pub reference_key: Option<&'a str>,
 }
 
 /// Creates a job in its pipeline's transaction.
 pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewJob<'_>) -> Result<(), sqlx::Error> {
     sqlx::query(
         "INSERT INTO jobs (id, pipeline_id, project_id, user_id, kind, state, failure_reason, message, attempts, \
-         max_attempts, season, publish_on_success, counts_for_quota, log_bytes, upload_bytes, created_at, finished_at) \
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14)",
+         max_attempts, season, publish_on_success, counts_for_quota, log_bytes, upload_bytes, created_at, finished_at, \
+         reference_key) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14, $15)",
     )
     .bind(new.id)
     .bind(new.pipeline_id)
@@ -420,6 +462,7 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewJob<'_>)
     .bind(new.counts_for_quota as i64)
     .bind(now_ms())
     .bind(new.finished_at)
+    .bind(new.reference_key)
     .execute(&mut **tx)
     .await?;
     Ok(())

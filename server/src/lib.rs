@@ -33,6 +33,7 @@ pub mod leaderboard;
 pub mod mail;
 pub mod pipelines;
 pub mod projects;
+pub mod references;
 pub mod results;
 pub mod routes;
 pub mod runners;

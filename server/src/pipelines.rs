@@ -311,6 +311,7 @@ pub async fn start(
         // Only jobs that were queued use up the day's runs or builds.
         counts_for_quota: kind != JobKind::Publish && job_state == JobState::Queued && source != Source::Season,
         finished_at: finished,
+        reference_key: None,
     };
     crate::jobs::insert(&mut tx, &new_job).await?;
     tx.commit().await?;
@@ -499,6 +500,10 @@ async fn end_job(
                 }
             }
             Ok(Some(result_id))
+        }
+        (JobState::Succeeded, _) if job.kind == JobKind::Reference => {
+            crate::references::store(state, &job).await?;
+            Ok(None)
         }
         (JobState::Succeeded, _) => {
             crate::jobs::end(&state.pool, job_id, JobState::Succeeded, None, &outcome.message, true).await?;

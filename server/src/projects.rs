@@ -135,11 +135,33 @@ pub async fn insert(
     }
 }
 
+/// Names kept for the service's own projects.
+const RESERVED_NAMES: &[&str] = &[crate::references::PROJECT];
+
 /// Creates a project row and its repository, or neither.
 pub async fn create(state: &AppState, owner: &User, name: &str, visibility: &str) -> Result<Project, ServiceError> {
-    let name = ProjectName::parse(name)?;
-    let visibility = Visibility::parse(visibility)?;
-    let project = insert(&state.pool, owner, &name, visibility).await?;
+    if RESERVED_NAMES.contains(&name) {
+        return Err(ServiceError::conflict(
+            "name_taken",
+            format!("the project name {name:?} is kept for the service: choose another name"),
+        ));
+    }
+    create_with_repository(state, owner, &ProjectName::parse(name)?, Visibility::parse(visibility)?).await
+}
+
+/// Creates the service account `owner`'s private project `name` (one of
+/// the reserved names), with its repository.
+pub async fn create_for_service(state: &AppState, owner: &User, name: &str) -> Result<Project, ServiceError> {
+    create_with_repository(state, owner, &ProjectName::parse(name)?, Visibility::Private).await
+}
+
+async fn create_with_repository(
+    state: &AppState,
+    owner: &User,
+    name: &ProjectName,
+    visibility: Visibility,
+) -> Result<Project, ServiceError> {
+    let project = insert(&state.pool, owner, name, visibility).await?;
     if let Err(e) = state.git.create(&project.id).await {
         sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
         state.git.delete(&project.id).await;

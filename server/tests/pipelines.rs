@@ -235,3 +235,95 @@ on_both_databases!(tokens_only_do_what_they_are_for, |db: Db| async move {
     let admin_only = ada.api(Method::GET, format!("{}/api/v1/admin/jobs", server.url)).send().await.unwrap();
     assert_eq!(json_of(admin_only).await.1["error"], "not_admin");
 });
+
+on_both_databases!(a_reference_is_made_once_for_every_runner, |db: Db| async move {
+    let server = spawn(db).await;
+    let (maker, other) = (FakeRunner::register(&server, "maker").await, FakeRunner::register(&server, "other").await);
+    let key = fbksd_exchange::scenes::reference_key("test renderer 1", 4, "sha256:scene");
+    let ask = json!({ "key": key, "scene": "experimental/sphere" });
+
+    // Runners asking at once: one reference job for the key.
+    let asks =
+        (0..6).map(|i| if i % 2 == 0 { &maker } else { &other }).map(|r| r.post("runners/references", ask.clone()));
+    let answers = futures_util::future::join_all(asks).await;
+    let jobs: std::collections::BTreeSet<_> = answers.iter().map(|(_, a)| a["job_id"].to_string()).collect();
+    assert_eq!(jobs.len(), 1, "{answers:?}");
+    assert!(answers.iter().all(|(s, a)| *s == 200 && a["state"] == "building"), "{answers:?}");
+
+    // Only a runner with that scene gets the job, before any other.
+    let (status, _) = other
+        .post(
+            "runners/jobs",
+            json!({ "reference_keys": ["sha256:".to_string() + &"0".repeat(64)], "references_only": true }),
+        )
+        .await;
+    assert_eq!(status, 204);
+    let (status, claim) = maker.post("runners/jobs", json!({ "reference_keys": [key], "references_only": true })).await;
+    assert_eq!((status, &claim["job"]["kind"]), (200, &json!("reference")), "{claim}");
+    assert_eq!(claim["reference"], json!({ "key": key, "scene": "experimental/sphere" }));
+    let job = common::HeldJob {
+        id: claim["job"]["id"].as_str().unwrap().into(),
+        token: claim["token"].as_str().unwrap().into(),
+        body: claim.clone(),
+    };
+
+    // Its end is refused until the reference is whole and its note makes the key.
+    let (status, body) = job.finish(&maker, json!({ "state": "succeeded" })).await;
+    assert_eq!(status, 409, "{body}");
+    let wrong = json!({ "generator": "test renderer 1", "samples_per_pixel": 8, "scene_digest": "sha256:scene" });
+    assert_eq!(job.send(&maker, Method::PUT, "files/reference.json", wrong.to_string().into()).await, 204);
+    assert_eq!(job.send(&maker, Method::PUT, "files/reference.exr", b"EXR pixels".to_vec().into()).await, 204);
+    let (status, body) = job.finish(&maker, json!({ "state": "succeeded" })).await;
+    assert_eq!(status, 400, "{body}");
+    assert!(body["message"].as_str().unwrap().contains("but the job makes"), "{body}");
+    let note = json!({ "generator": "test renderer 1", "samples_per_pixel": 4, "scene_digest": "sha256:scene" });
+    assert_eq!(job.send(&maker, Method::PUT, "files/reference.json", note.to_string().into()).await, 204);
+    assert_eq!(job.send(&maker, Method::PUT, "files/reference-albedo.exr", b"albedo".to_vec().into()).await, 204);
+    let (status, body) = job.finish(&maker, json!({ "state": "succeeded" })).await;
+    assert_eq!(status, 200, "{body}");
+
+    // Every other runner downloads it, and can check it.
+    let (status, ready) = other.post("runners/references", ask.clone()).await;
+    let digest = format!("sha256:{:x}", <sha2::Sha256 as sha2::Digest>::digest(b"EXR pixels"));
+    assert_eq!((status, &ready["state"], &ready["reference_hash"]), (200, &json!("ready"), &json!(digest)), "{ready}");
+    assert_eq!(ready["files"], json!(["reference-albedo.exr", "reference.exr", "reference.json"]));
+    assert_eq!(ready["job_id"].to_string(), *jobs.first().unwrap());
+    assert_eq!(
+        other.get(&format!("runners/references/{key}/files/reference.exr")).await,
+        (200, b"EXR pixels".to_vec())
+    );
+    assert_eq!(other.get(&format!("runners/references/{key}/files/secrets.txt")).await.0, 400);
+    let unknown = "sha256:".to_string() + &"1".repeat(64);
+    assert_eq!(other.get(&format!("runners/references/{unknown}/files/reference.exr")).await.0, 404);
+    assert_eq!(other.post("runners/references", json!({ "key": "latest", "scene": "x" })).await.0, 400);
+
+    // A failed reference job is retried by the next ask.
+    let key2 = fbksd_exchange::scenes::reference_key("test renderer 1", 4, "sha256:other scene");
+    let ask2 = json!({ "key": key2, "scene": "experimental/other" });
+    let (_, first) = maker.post("runners/references", ask2.clone()).await;
+    let (_, claim) = maker.post("runners/jobs", json!({ "reference_keys": [key2] })).await;
+    let failing = common::HeldJob {
+        id: claim["job"]["id"].as_str().unwrap().into(),
+        token: claim["token"].as_str().unwrap().into(),
+        body: claim.clone(),
+    };
+    let (status, _) =
+        failing.finish(&maker, json!({ "state": "failed", "reason": "crashed", "message": "renderer died" })).await;
+    assert_eq!(status, 200);
+    assert_eq!(other.get(&format!("runners/references/{key2}/files/reference.exr")).await.0, 404);
+    let (_, again) = other.post("runners/references", ask2).await;
+    assert_eq!(again["state"], "building", "{again}");
+    assert_ne!(again["job_id"], first["job_id"], "a new job");
+
+    // Users cannot take the references' project name.
+    let ada = server.user("ada@example.org").await;
+    let (status, body) = json_of(
+        ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
+            .json(&json!({ "name": "scene-references" }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, 409, "{body}");
+});

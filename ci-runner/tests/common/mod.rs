@@ -80,6 +80,8 @@ pub struct RunnerOptions<'a> {
     pub env: Vec<(&'a str, String)>,
     /// Run the runner as this (uid, gid) instead of the test's user.
     pub user: Option<(u32, u32)>,
+    /// Its scene root (default: the workspace's scenes).
+    pub scene_root: Option<PathBuf>,
 }
 
 impl Default for RunnerOptions<'_> {
@@ -92,6 +94,7 @@ impl Default for RunnerOptions<'_> {
             memory_mib: 512,
             env: Vec::new(),
             user: None,
+            scene_root: None,
         }
     }
 }
@@ -118,7 +121,7 @@ impl RunnerProcess {
             .arg("--images")
             .arg(bin_dir().join("fbksd-test-images.json"))
             .arg("--scene-root")
-            .arg(workspace().join("scenes"))
+            .arg(options.scene_root.clone().unwrap_or_else(|| workspace().join("scenes")))
             .args(["--scene", &options.scenes.join(","), "--spp", options.spp])
             .args(["--run-timeout", options.run_timeout, "--build-timeout", options.build_timeout])
             .args(["--memory-mib", &options.memory_mib.to_string(), "--renderer-memory-mib", "2048"])

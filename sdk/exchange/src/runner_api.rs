@@ -6,6 +6,12 @@
 //! POST /api/v1/runners              Registration → RunnerCredentials
 //! POST /api/v1/runners/jobs         ClaimRequest → 200 Claim | 204 none
 //! POST /api/v1/runners/status       StatusReport → 204
+//! POST /api/v1/runners/references   ReferenceRequest → ReferenceStatus
+//!                                    (queues a reference job when none is
+//!                                    stored, building or retried yet)
+//! GET  /api/v1/runners/references/{key}/files/{name}  a stored reference's
+//!                                    file (reference.exr, reference.json,
+//!                                    reference-<buffer>.exr)
 //! POST /api/v1/jobs/{id}/heartbeat  → Lease
 //! POST /api/v1/jobs/{id}/log        text body (appended)
 //! PUT  /api/v1/jobs/{id}/files/{*}  a file of the result set
@@ -32,6 +38,9 @@ pub enum JobKind {
     Benchmark,
     /// Publish a result (`FBKSD_PUBLISH`): done by the server at once.
     Publish,
+    /// Make a scene's reference and upload it, for every runner to download
+    /// ([`ReferenceTask`]).
+    Reference,
 }
 
 impl JobKind {
@@ -41,12 +50,15 @@ impl JobKind {
             JobKind::Build => "build",
             JobKind::Benchmark => "benchmark",
             JobKind::Publish => "publish",
+            JobKind::Reference => "reference",
         }
     }
 
     /// The kind named `text`, if any.
     pub fn parse(text: &str) -> Option<JobKind> {
-        [JobKind::Build, JobKind::Benchmark, JobKind::Publish].into_iter().find(|k| k.as_str() == text)
+        [JobKind::Build, JobKind::Benchmark, JobKind::Publish, JobKind::Reference]
+            .into_iter()
+            .find(|k| k.as_str() == text)
     }
 }
 
@@ -134,13 +146,21 @@ pub struct StatusReport {
     pub preparing: Option<String>,
 }
 
-/// How long a claim may wait on the server for a job.
+/// What a runner can take, and how long the claim may wait on the server.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ClaimRequest {
     /// Seconds (capped by the server).
     #[serde(default)]
     pub wait_seconds: u64,
+    /// The reference keys ([`crate::scenes::reference_key`]) of the scenes
+    /// this runner has: it is handed reference jobs of these keys only
+    /// (before any other job).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub reference_keys: Vec<String>,
+    /// Only reference jobs (a runner still preparing its scene pool).
+    #[serde(default)]
+    pub references_only: bool,
 }
 
 /// A claimed job.
@@ -158,6 +178,81 @@ pub struct Claim {
     pub lease_seconds: u64,
     /// The server's public URL.
     pub results_url: String,
+    /// The reference to make, for a reference job.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<ReferenceTask>,
+}
+
+/// A reference job's task: make the reference of `key` and upload its
+/// files (`reference.exr`, `reference.json`, the feature buffers) with
+/// `PUT /api/v1/jobs/{id}/files/{name}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceTask {
+    /// The reference's key ([`crate::scenes::reference_key`]).
+    pub key: String,
+    /// The scene, relative to the scene root (`experimental/sphere`).
+    pub scene: String,
+}
+
+/// A stored reference's image, whatever the scene's metadata names it.
+pub const REFERENCE_IMAGE: &str = "reference.exr";
+/// A stored reference's note (what made it: its key's parts).
+pub const REFERENCE_NOTE: &str = "reference.json";
+
+/// A stored reference's file of the feature buffer `buffer`.
+pub fn reference_buffer_file(buffer: &str) -> String {
+    format!("reference-{buffer}.exr")
+}
+
+/// Whether `name` is one of a stored reference's files.
+pub fn is_reference_file(name: &str) -> bool {
+    name == REFERENCE_IMAGE
+        || name == REFERENCE_NOTE
+        || crate::scenes::FEATURE_BUFFERS.iter().any(|b| reference_buffer_file(b) == name)
+}
+
+/// A runner's request for a reference it lacks.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceRequest {
+    /// The reference's key ([`crate::scenes::reference_key`]).
+    pub key: String,
+    /// The scene, relative to the scene root.
+    pub scene: String,
+}
+
+/// Where a reference is on the service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReferenceState {
+    /// A reference job is queued or running.
+    Building,
+    /// Stored: download its files.
+    Ready,
+    /// Its last job failed (asking again queues another).
+    Failed,
+}
+
+/// The server's answer about one reference.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ReferenceStatus {
+    /// The reference's key.
+    pub key: String,
+    /// The scene it was first asked for.
+    pub scene: String,
+    /// Building, ready or failed.
+    pub state: ReferenceState,
+    /// SHA-256 of `reference.exr` (`sha256:<hex>`), once ready.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_hash: Option<String>,
+    /// The files stored, once ready.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub files: Vec<String>,
+    /// The reference job that makes (or made) it.
+    pub job_id: String,
+    /// The job's message (why it failed).
+    #[serde(default)]
+    pub message: String,
 }
 
 /// The job a runner works on.
@@ -370,7 +465,7 @@ mod tests {
             assert_eq!(JobState::parse(s.as_str()), Some(s));
             assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
         }
-        for k in [JobKind::Build, JobKind::Benchmark, JobKind::Publish] {
+        for k in [JobKind::Build, JobKind::Benchmark, JobKind::Publish, JobKind::Reference] {
             assert_eq!(JobKind::parse(k.as_str()), Some(k));
             assert_eq!(serde_json::to_value(k).unwrap(), k.as_str());
         }

@@ -109,6 +109,19 @@ pub fn reference_key(generator: &str, samples_per_pixel: u64, scene_digest: &str
     format!("sha256:{:x}", Sha256::digest(text.as_bytes()))
 }
 
+/// The key ([`reference_key`]) of the reference a note (`reference.json`,
+/// as every renderer writes it: `generator`, `samples_per_pixel`,
+/// `scene_digest`) describes.
+pub fn note_reference_key(note: &[u8]) -> Result<String, String> {
+    let note: serde_json::Value = serde_json::from_slice(note).map_err(|e| e.to_string())?;
+    let (Some(generator), Some(spp), Some(digest)) =
+        (note["generator"].as_str(), note["samples_per_pixel"].as_u64(), note["scene_digest"].as_str())
+    else {
+        return Err("it must name generator, samples_per_pixel and scene_digest".into());
+    };
+    Ok(reference_key(generator, spp, digest))
+}
+
 /// The one rule for cached references, shared by every renderer: the
 /// reference beside a scene is kept when it and its note (`reference.json`)
 /// exist and the note names the same `generator`, `samples_per_pixel` and

@@ -79,6 +79,8 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/runners", post(runner::register))
         .route("/api/v1/runners/jobs", post(runner::claim))
         .route("/api/v1/runners/status", post(runner::status))
+        .route("/api/v1/runners/references", post(runner::request_reference))
+        .route("/api/v1/runners/references/{key}/files/{name}", get(runner::reference_file))
         .route("/api/v1/jobs/{id}/heartbeat", post(runner::heartbeat))
         .route("/api/v1/jobs/{id}/results", put(runner::put_results))
         .route("/api/v1/jobs/{id}/files/{*name}", put(runner::put_file))

@@ -15,7 +15,8 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use fbksd_exchange::runner_api::{
-    Claim, ClaimRequest, ClaimedJob, Finished, Lease, Outcome, Registration, RunnerCredentials, StatusReport,
+    Claim, ClaimRequest, ClaimedJob, Finished, Lease, Outcome, ReferenceRequest, ReferenceStatus, ReferenceTask,
+    Registration, RunnerCredentials, StatusReport,
 };
 use std::time::{Duration, Instant};
 
@@ -42,22 +43,36 @@ pub async fn status(
 }
 
 /// `POST /api/v1/runners/jobs`: the next job, waiting up to `wait_seconds`
-/// (capped by the server) for one; 204 when none came.
+/// (capped by the server) for one; 204 when none came. Reference jobs of
+/// the runner's scenes go first.
 pub async fn claim(
     State(state): State<AppState>,
     RunnerCaller(runner_id): RunnerCaller,
     body: Option<Json<ClaimRequest>>,
 ) -> Result<Response, ApiError> {
-    let wait = body.map(|b| b.0.wait_seconds).unwrap_or(0).min(state.config.long_poll_seconds);
+    let request = body.map(|b| b.0).unwrap_or_default();
+    let wait = request.wait_seconds.min(state.config.long_poll_seconds);
     let deadline = Instant::now() + Duration::from_secs(wait);
     let lease_ms = state.config.lease_seconds as i64 * 1000;
+    let (pool, postgres) = (&state.pool, state.postgres);
     loop {
         // Expired leases are queued again by the server's sweeper (every second).
         let notified = state.job_queued.notified();
-        if let Some(claimed) = crate::jobs::claim(&state.pool, state.postgres, &runner_id, lease_ms).await? {
+        let mut claimed =
+            crate::jobs::claim_reference(pool, postgres, &runner_id, lease_ms, &request.reference_keys).await?;
+        if claimed.is_none() && !request.references_only {
+            claimed = crate::jobs::claim(pool, postgres, &runner_id, lease_ms).await?;
+        }
+        if let Some(claimed) = claimed {
             let job = claimed.job;
             // A new attempt starts clean: an earlier one's files never count for it.
             crate::pipelines::discard_attempt(&state, &job.id).await?;
+            let reference = match &job.reference_key {
+                Some(key) => crate::references::status(pool, &state.config.data_dir, key)
+                    .await?
+                    .map(|s| ReferenceTask { key: s.key, scene: s.scene }),
+                None => None,
+            };
             return Ok(Json(Claim {
                 repository: state.clone_url(&job.project),
                 commit: job.commit_sha,
@@ -71,6 +86,7 @@ pub async fn claim(
                 token: claimed.token,
                 lease_seconds: state.config.lease_seconds,
                 results_url: state.public_url.clone(),
+                reference,
             })
             .into_response());
         }
@@ -81,6 +97,28 @@ pub async fn claim(
         // Woken by a job queued here, or polling for jobs queued on other instances.
         let _ = tokio::time::timeout((deadline - now).min(Duration::from_secs(1)), notified).await;
     }
+}
+
+/// `POST /api/v1/runners/references`: a runner lacks a reference; where
+/// it is on the service (a reference job is queued when none is stored or
+/// building).
+pub async fn request_reference(
+    State(state): State<AppState>,
+    RunnerCaller(_): RunnerCaller,
+    Json(body): Json<ReferenceRequest>,
+) -> Result<Json<ReferenceStatus>, ApiError> {
+    Ok(Json(crate::references::request(&state, &body).await?))
+}
+
+/// `GET /api/v1/runners/references/{key}/files/{name}`: a stored reference's file.
+pub async fn reference_file(
+    State(state): State<AppState>,
+    RunnerCaller(_): RunnerCaller,
+    Path((key, name)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let path = crate::references::file(&state.pool, &state.config.data_dir, &key, &name).await?;
+    let bytes = tokio::fs::read(&path).await.map_err(ApiError::internal)?;
+    Ok(([(axum::http::header::CONTENT_TYPE, "application/octet-stream")], bytes).into_response())
 }
 
 /// `POST /api/v1/jobs/{id}/heartbeat`: extends the lease.

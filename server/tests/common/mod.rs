@@ -339,6 +339,20 @@ impl FakeRunner {
         }
     }
 
+    /// POSTs `body` to the runner API's `path` with the runner token; the answer.
+    pub async fn post(&self, path: &str, body: serde_json::Value) -> (u16, serde_json::Value) {
+        let response =
+            self.client.post(format!("{}/api/v1/{path}", self.url)).bearer_auth(&self.token).json(&body).send().await;
+        json_of(response.unwrap()).await
+    }
+
+    /// GETs the runner API's `path` with the runner token; the status and body.
+    pub async fn get(&self, path: &str) -> (u16, Vec<u8>) {
+        let response =
+            self.client.get(format!("{}/api/v1/{path}", self.url)).bearer_auth(&self.token).send().await.unwrap();
+        (response.status().as_u16(), response.bytes().await.unwrap().to_vec())
+    }
+
     /// A request about `job` with `token` (usually the job's own).
     pub fn job_request(&self, method: reqwest::Method, job: &str, token: &str, tail: &str) -> reqwest::RequestBuilder {
         self.client.request(method, format!("{}/api/v1/jobs/{job}/{tail}", self.url)).bearer_auth(token)
