@@ -214,7 +214,7 @@ timing "up to 2 runners ready: $(seconds_since "$step") s"
 # The scene's reference: made by one runner, downloaded by the other.
 made=0 downloaded=0 reference_s=
 for c in $(runner_containers); do
-    made=$((made + $(docker logs "$c" 2>&1 | grep -c 'making reference' || true)))
+    made=$((made + $(docker logs "$c" 2>&1 | grep -c 'references: making reference' || true)))
     downloaded=$((downloaded + $(docker logs "$c" 2>&1 | grep -c 'reference of .* downloaded' || true)))
     # From "making reference" to its job's end, by the log's own timestamps.
     reference_s=${reference_s:-$(docker logs --timestamps "$c" 2>&1 | python3 -c '
@@ -335,7 +335,7 @@ added=$(comm -13 <(echo "$before") <(runner_containers | sort))
 docker start "$added" >/dev/null
 wait_runners_ready 1 600
 added_id=$(runner_id_of "$added")
-made=$(docker logs "$added" 2>&1 | grep -c 'making reference' || true)
+made=$(docker logs "$added" 2>&1 | grep -c 'references: making reference' || true)
 [ "$made" = 0 ] || fail "the added runner made the reference again instead of downloading it"
 timing "up --scale runner=3 to the added runner ready (registered, reference downloaded): $(seconds_since "$step") s"
 for _ in $(seq 240); do

@@ -1,8 +1,10 @@
 //! `deploy/compose.yaml`, brought up and checked by `deploy/compose-check.sh`
-//! on this machine's Docker engine: PostgreSQL, the server and two runners;
-//! a push per runner, each doing one job; a runner stopped mid-job and its
+//! on this machine's Docker engine: PostgreSQL, the server and two runners,
+//! the scene's reference made by one and downloaded by the other; a push
+//! per runner, each doing one job; a runner stopped mid-job and its
 //! job finished by the other; the board identical afterwards; a third
-//! runner added to the running service, with the time to its first job.
+//! runner added to the running service, which downloads the reference, with
+//! the time to its first job.
 //! It uses the debug build the tests already made (`cargo build
 //! --workspace`), as CI does. Prints the script's timings.
 
