@@ -89,11 +89,15 @@ impl Runner {
                 return Err(e);
             }
         };
+        let rendezvous_parent = rendezvous_parent(&credentials.id);
+        if let Err(e) = check_socket_room(&fbksd_core::rendezvous::default_parent(), &credentials.id) {
+            let _ = api.status(&credentials.token, Some(&format!("stopped: {e}"))).await;
+            anyhow::bail!(e);
+        }
         let docker = wait_for_docker(&api, &credentials.token).await;
         let images = Images::resolve(&config.images, &docker).await?;
         // Pinned even when no cores are named: to all of them, as recorded in every result.
         let sandbox = Sandbox::new(docker, &credentials.id, machine.cpuset.clone(), config.pids, config.tmpfs_mib);
-        let rendezvous_parent = rendezvous_parent(&credentials.id);
         let left = sandbox.remove_runner_containers().await;
         if left > 0 {
             tracing::warn!("removed {left} containers a previous run of this runner left behind");
@@ -326,8 +330,42 @@ fn write_private(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     std::fs::rename(tmp, path)
 }
 
+/// Refuses a runtime directory so long that a run's control socket
+/// (`<runtime>/fbksd-ci-<runner id>/fbksd-run-XXXXXX/control.sock`) could
+/// not be bound: a Unix socket's path holds at most 107 bytes, and every
+/// run would fail late.
+fn check_socket_room(runtime: &Path, runner_id: &str) -> Result<(), String> {
+    let parent = runtime.join(format!("fbksd-ci-{runner_id}"));
+    let socket = fbksd_core::rendezvous::control_socket(&parent.join("fbksd-run-XXXXXX"));
+    let length = socket.as_os_str().len();
+    if length > 107 {
+        let room = 107usize.saturating_sub(length - runtime.as_os_str().len());
+        return Err(format!(
+            "a run's control socket would be {} ({length} bytes; a Unix socket's path holds at most 107): \
+             set FBKSD_RUNTIME_DIR to a directory of at most {room} characters",
+            socket.display()
+        ));
+    }
+    Ok(())
+}
+
 /// This runner's own directory for rendezvous directories, wiped at start:
 /// under the manager's usual parent (`/dev/shm` when writable, memory-backed).
 fn rendezvous_parent(runner_id: &str) -> PathBuf {
     fbksd_core::rendezvous::default_parent().join(format!("fbksd-ci-{runner_id}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    #[test]
+    fn a_runtime_directory_too_long_for_the_control_socket_is_refused_with_the_room_left() {
+        let id = "0123abcd-0123-4567-89ab-0123456789ab";
+        assert!(super::check_socket_room(Path::new("/dev/shm"), id).is_ok());
+        assert!(super::check_socket_room(Path::new(&format!("/{}", "r".repeat(30))), id).is_ok());
+        let long = format!("/{}", "r".repeat(31));
+        let refused = super::check_socket_room(Path::new(&long), id).unwrap_err();
+        assert!(refused.contains("108 bytes") && refused.contains("at most 31 characters"), "{refused}");
+    }
 }

@@ -11,30 +11,20 @@
 #   empties its work directory at start (FBKSD_CI_WORK_DIR overrides it).
 # - Rendezvous: FBKSD_RUNTIME_DIR, where runs share memory with their
 #   containers, is a host directory at the same path too (the container's
-#   own /dev/shm is not the host's), of at most 31 characters.
+#   own /dev/shm is not the host's), of at most 31 characters (fbksd-ci
+#   says so at start otherwise).
 # - Cores: FBKSD_CI_CPUS defaults to the cores this container may use (a
 #   Kubernetes pod's own cores under the static CPU manager), not to
 #   0..N-1 as fbksd-ci alone would.
 set -eu
-for file in "${FBKSD_SECRETS_DIR:-/run/secrets}"/FBKSD_*; do
-    [ -f "$file" ] || continue
-    name=${file##*/}
-    case "$name" in *[!A-Z0-9_]*) echo "fbksd-entrypoint: $file: not a variable name" >&2; exit 1 ;; esac
-    value=$(cat "$file")
-    export "$name=$value"
-done
+. /usr/local/lib/fbksd/secrets.sh
 if [ -z "${FBKSD_CI_WORK_DIR:-}" ]; then
     FBKSD_CI_WORK_DIR=${FBKSD_CI_WORK_ROOT:?set FBKSD_CI_WORK_ROOT (a host directory at the same path) or FBKSD_CI_WORK_DIR}/$(hostname)
     export FBKSD_CI_WORK_DIR
 fi
 mkdir -p "$FBKSD_CI_WORK_DIR"
 if [ -n "${FBKSD_RUNTIME_DIR:-}" ]; then
-    # A run's control socket is fbksd-ci-<runner id>/fbksd-run-XXXXXX/control.sock
-    # below it (76 characters), and a Unix socket's path has at most 107.
-    if [ ${#FBKSD_RUNTIME_DIR} -gt 31 ]; then
-        echo "fbksd-entrypoint: FBKSD_RUNTIME_DIR=$FBKSD_RUNTIME_DIR is longer than 31 characters: runs could not bind their control sockets" >&2
-        exit 1
-    fi
+    # fbksd-ci refuses one too long for a run's control socket.
     mkdir -p "$FBKSD_RUNTIME_DIR"
 fi
 if [ -z "${FBKSD_CI_CPUS:-}" ]; then
