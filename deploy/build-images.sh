@@ -9,7 +9,7 @@
 #             downloaded here on the host and cached in ~/.cache/fbksd/wheels)
 #   renderer  base + the built-in renderers and the scene files (no references)
 # Each tag is a hash of the image's content (its Dockerfile, the files it
-# copies and its base), so an unchanged image is never rebuilt. The
+# copies and its base; deploy/lib/images.sh), so an unchanged image is never rebuilt. The
 # manifest (JSON) names the four tags; fbksd-ci reads it (--images).
 #
 #   bash deploy/build-images.sh [--bin-dir DIR] [--manifest FILE]
@@ -30,6 +30,7 @@ while [ $# -gt 0 ]; do
     esac
 done
 say() { echo "build-images: $*" >&2; }
+. deploy/lib/images.sh
 if [ -z "$bin_dir" ]; then
     cargo build --release --locked -p fbksd-capi -p fbksd-python -p fbksd-procedural -p fbksd-embree
     bin_dir=$(pwd)/target/release
@@ -52,7 +53,6 @@ if ! docker image inspect "$base" >/dev/null 2>&1; then
     say "building $base with mmdebstrap from ${sources[*]}"
     mmdebstrap --quiet --variant=minbase --mode=root bookworm - "${sources[@]}" | docker import - "$base" >/dev/null
 fi
-base_id=$(docker image inspect --format '{{.Id}}' "$base")
 
 # --- the images on top of it ---------------------------------------------------------------
 stage=$(mktemp -d)
@@ -79,29 +79,15 @@ stage_python() {
 stage_renderer() {
     mkdir -p "$1/bin" "$1/scenes"
     cp "$bin_dir/fbksd-procedural" "$bin_dir/fbksd-embree" "$1/bin/"
-    (cd scenes && find . -type f ! -name 'reference.*' ! -name 'reference-*' ! -name '*.py' ! -name '*.md' -print0 \
-        | xargs -0 cp --parents -t "$1/scenes")
+    stage_scenes "$1/scenes"
 }
 
 declare -A tags
 for name in cpp python renderer; do
-    ctx="$stage/$name"
-    mkdir -p "$ctx"
-    cp "deploy/images/$name/Dockerfile" "$ctx/"
-    "stage_$name" "$ctx"
-    hash=$( (echo "$base_id"; cd "$ctx" && find . -type f -print0 | sort -z | xargs -0 sha256sum) | sha256sum | cut -c1-16)
-    tag=fbksd-$name:$hash
-    if ! docker image inspect "$tag" >/dev/null 2>&1; then
-        say "building $tag"
-        started=$SECONDS
-        if ! docker build --quiet --network host --build-arg "BASE=$base" -t "$tag" "$ctx" >"$stage/$name.log" 2>&1; then
-            cat "$stage/$name.log" >&2
-            say "building $tag failed"
-            exit 1
-        fi
-        say "built $tag in $((SECONDS - started)) s ($(docker image inspect --format '{{.Size}}' "$tag" | awk '{printf "%.0f MB", $1 / 1e6}'))"
-    fi
-    tags[$name]=$tag
+    mkdir -p "$stage/$name"
+    cp "deploy/images/$name/Dockerfile" "$stage/$name/"
+    "stage_$name" "$stage/$name"
+    tags[$name]=$(build_image "$name" "$stage/$name" "$base")
 done
 
 mkdir -p "$(dirname "$manifest")"

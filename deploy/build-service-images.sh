@@ -32,6 +32,7 @@ while [ $# -gt 0 ]; do
     esac
 done
 say() { echo "build-service-images: $*" >&2; }
+. deploy/lib/images.sh
 if [ -z "$bin_dir" ]; then
     cargo build --release --locked -p fbksd-server -p fbksd-ci -p fbksd-capi -p fbksd-python \
         -p fbksd-procedural -p fbksd-embree
@@ -45,7 +46,6 @@ done
 bash deploy/build-images.sh --bin-dir "$bin_dir" --manifest "$manifest"
 base=$(sed -n 's/.*"base": *"\([^"]*\)".*/\1/p' "$manifest")
 [ -n "$base" ] || { say "no base image in $manifest"; exit 1; }
-base_id=$(docker image inspect --format '{{.Id}}' "$base")
 
 stage=$(mktemp -d)
 trap 'rm -rf "$stage"' EXIT
@@ -53,16 +53,14 @@ trap 'rm -rf "$stage"' EXIT
 stage_server() {
     mkdir -p "$1/bin"
     cp "$bin_dir/fbksd-server" "$1/bin/"
-    cp deploy/images/server/entrypoint.sh "$1/"
+    cp deploy/images/server/entrypoint.sh deploy/images/secrets.sh "$1/"
 }
 stage_runner() {
-    mkdir -p "$1/bin" "$1/scenes"
+    mkdir -p "$1/bin"
     cp "$bin_dir/fbksd-ci" "$bin_dir/fbksd-procedural" "$bin_dir/fbksd-embree" "$1/bin/"
-    cp deploy/images/runner/entrypoint.sh "$1/"
+    cp deploy/images/runner/entrypoint.sh deploy/images/secrets.sh "$1/"
     cp "$manifest" "$1/images.json"
-    # As the renderer image holds them: no references (the runner makes or fetches them).
-    (cd scenes && find . -type f ! -name 'reference.*' ! -name 'reference-*' ! -name '*.py' ! -name '*.md' -print0 \
-        | xargs -0 cp --parents -t "$1/scenes")
+    stage_scenes "$1/scenes"
 }
 stage_postgres() {
     cp deploy/images/postgres/entrypoint.sh "$1/"
@@ -70,25 +68,10 @@ stage_postgres() {
 
 declare -A tags
 for name in server runner postgres; do
-    ctx="$stage/$name"
-    mkdir -p "$ctx"
-    cp "deploy/images/$name/Dockerfile" "$ctx/"
-    "stage_$name" "$ctx"
-    # Modes too: an entrypoint that lost its execute bit is another image.
-    hash=$( (echo "$base_id"; cd "$ctx" && find . -type f -print0 | sort -z | xargs -0 sha256sum \
-        && find . -type f -printf '%m %p\n' | sort) | sha256sum | cut -c1-16)
-    tag=fbksd-$name:$hash
-    if ! docker image inspect "$tag" >/dev/null 2>&1; then
-        say "building $tag"
-        started=$SECONDS
-        if ! docker build --quiet --network host --build-arg "BASE=$base" -t "$tag" "$ctx" >"$stage/$name.log" 2>&1; then
-            cat "$stage/$name.log" >&2
-            say "building $tag failed"
-            exit 1
-        fi
-        say "built $tag in $((SECONDS - started)) s ($(docker image inspect --format '{{.Size}}' "$tag" | awk '{printf "%.0f MB", $1 / 1e6}'))"
-    fi
-    tags[$name]=$tag
+    mkdir -p "$stage/$name"
+    cp "deploy/images/$name/Dockerfile" "$stage/$name/"
+    "stage_$name" "$stage/$name"
+    tags[$name]=$(build_image "$name" "$stage/$name" "$base")
 done
 
 variables="FBKSD_IMAGE_SERVER=${tags[server]}

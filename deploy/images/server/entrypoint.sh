@@ -6,11 +6,5 @@
 # environment or a configuration file, not from files of their own. A
 # command line is readable by every user of the machine; this is not.
 set -eu
-for file in "${FBKSD_SECRETS_DIR:-/run/secrets}"/FBKSD_*; do
-    [ -f "$file" ] || continue
-    name=${file##*/}
-    case "$name" in *[!A-Z0-9_]*) echo "fbksd-entrypoint: $file: not a variable name" >&2; exit 1 ;; esac
-    value=$(cat "$file")
-    export "$name=$value"
-done
+. /usr/local/lib/fbksd/secrets.sh
 exec "$@"
