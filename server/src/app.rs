@@ -26,6 +26,8 @@ pub struct AppState {
     pub job_queued: Arc<tokio::sync::Notify>,
     /// Leaderboards kept in memory.
     pub boards: crate::leaderboard::BoardCache,
+    /// Public leaderboards rendered for anonymous readers.
+    pub public_boards: crate::routes::PublicBoards,
     /// Rate limits on log-ins and account mail.
     pub throttle: crate::throttle::Throttle,
     /// Metrics for operators (`/metrics`).
@@ -114,6 +116,7 @@ impl Application {
             postgres,
             job_queued: Arc::new(tokio::sync::Notify::new()),
             boards: Default::default(),
+            public_boards: Default::default(),
             throttle: crate::throttle::Throttle::new(&config),
             telemetry: Default::default(),
         };

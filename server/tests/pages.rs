@@ -128,6 +128,25 @@ on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its
     }
     assert_eq!(page(reqwest::Client::new(), "/results/not-a-uuid".into()).await.0, 400);
 
+    // Anonymous visitors share one rendered board, revalidated by its ETag.
+    let anonymous = reqwest::Client::new();
+    let first = anonymous.get(format!("{}/results/", server.url)).send().await.unwrap();
+    let etag = first.headers()["etag"].to_str().unwrap().to_string();
+    let (_, before) = text(first).await;
+    assert!(before.contains("bob-filter") && !before.contains("ada-filter"));
+    let again = anonymous.get(format!("{}/results/", server.url)).header("if-none-match", &etag).send().await.unwrap();
+    assert_eq!((again.status().as_u16(), again.text().await.unwrap().len()), (304, 0));
+    let api = anonymous.get(format!("{}/api/v1/leaderboard", server.url)).send().await.unwrap();
+    let api_etag = api.headers()["etag"].to_str().unwrap().to_string();
+    assert_ne!(api_etag, etag, "the JSON and the page are told apart");
+    assert!(api.text().await.unwrap().contains("\"bob-filter\""));
+    let api_again =
+        anonymous.get(format!("{}/api/v1/leaderboard", server.url)).header("if-none-match", &api_etag).send().await;
+    assert_eq!(api_again.unwrap().status(), 304);
+    let signed_in = ada.browser.get(format!("{}/results/", server.url)).send().await.unwrap();
+    assert!(signed_in.headers().get("etag").is_none(), "a user's page is their own");
+    assert!(text(signed_in).await.1.contains("ada@example.org"));
+
     // Publishing from the page puts it on the leaderboard.
     let publish = ada
         .browser
@@ -145,6 +164,10 @@ on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its
         .await
         .unwrap();
     assert_eq!(forged.status(), 404, "only the owner unpublishes");
+    let changed =
+        anonymous.get(format!("{}/results/", server.url)).header("if-none-match", &etag).send().await.unwrap();
+    assert_eq!(changed.status(), 200, "the board changed: the page is new");
+    assert_ne!(changed.headers()["etag"].to_str().unwrap(), etag);
     let (status, board) = page(reqwest::Client::new(), "/results/".into()).await;
     assert_eq!(status, 200);
     assert!(board.contains("ada-filter") && board.contains("bob-filter"));

@@ -18,6 +18,9 @@ pub mod error;
 pub mod limits;
 mod operations;
 mod pages;
+mod public_boards;
+
+pub use public_boards::{PublicBoards, Rendering};
 mod projects;
 mod results;
 mod runner;

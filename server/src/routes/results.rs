@@ -25,12 +25,18 @@ pub async fn show(
     Ok(Json(json!({ "result": set, "runs": runs, "board": board })))
 }
 
-/// `GET /api/v1/leaderboard?season=&sort=&tag=`.
+/// `GET /api/v1/leaderboard?season=&sort=&tag=`: the same for every
+/// reader, so rendered once per board version ([`crate::routes::PublicBoards`]).
 pub async fn board(
     State(state): State<AppState>,
     Query(query): Query<BoardQuery>,
-) -> Result<Json<std::sync::Arc<leaderboard::Board>>, ApiError> {
-    Ok(Json(leaderboard::build(&state.pool, &state.boards, &query, None).await?))
+    headers: axum::http::HeaderMap,
+) -> Result<Response, ApiError> {
+    let render = async {
+        let board = leaderboard::build(&state.pool, &state.boards, &query, None).await?;
+        serde_json::to_string(&board).map_err(ApiError::internal)
+    };
+    state.public_boards.respond(&state.pool, crate::routes::Rendering::Json, &query, &headers, render).await
 }
 
 /// `POST /api/v1/results/{id}/publish`: the owner publishes.

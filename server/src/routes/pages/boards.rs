@@ -85,6 +85,16 @@ async fn board_page(
     result: Option<crate::results::ResultSet>,
     home: bool,
 ) -> PageResult {
+    Ok(render(&board_template(state, nav, query, result, home).await?))
+}
+
+async fn board_template(
+    state: &AppState,
+    nav: Nav,
+    query: BoardQuery,
+    result: Option<crate::results::ResultSet>,
+    home: bool,
+) -> Result<BoardPage, PageError> {
     let query = BoardQuery { tag: query.tag.filter(|t| !t.is_empty()), ..query };
     let board = leaderboard::build(&state.pool, &state.boards, &query, result.as_ref()).await?;
     let seasons = crate::results::seasons(&state.pool).await?.into_iter().map(|(n, note, _)| (n, note)).collect();
@@ -188,16 +198,27 @@ async fn board_page(
         left_out: board.left_out.clone(),
         viewer_tags: fbksd_exchange::viewer::asset_tags("/static/viewer/"),
     };
-    Ok(render(&page))
+    Ok(page)
 }
 
-/// `GET /results/`: the public leaderboard.
+/// `GET /results/`: the public leaderboard. Anonymous visitors, most of
+/// its readers, all see one page per query: it is rendered once per board
+/// version and revalidated by its ETag ([`crate::routes::PublicBoards`]).
 pub async fn leaderboard_page(
     State(state): State<AppState>,
     Visitor(nav): Visitor,
     Query(query): Query<BoardQuery>,
+    headers: axum::http::HeaderMap,
 ) -> PageResult {
-    board_page(&state, nav, query, None, false).await
+    if nav.user.is_some() {
+        return board_page(&state, nav, query, None, false).await;
+    }
+    let query = BoardQuery { tag: query.tag.filter(|t| !t.is_empty()), ..query };
+    let render = async {
+        let page = board_template(&state, nav, query.clone(), None, false).await.map_err(|e| e.0)?;
+        page.render().map_err(ApiError::internal)
+    };
+    Ok(state.public_boards.respond(&state.pool, crate::routes::Rendering::Html, &query, &headers, render).await?)
 }
 
 /// `GET /results/{id}`: a result set beside every published technique.

@@ -1,0 +1,102 @@
+//! Public leaderboards as anonymous readers get them, rendered once per
+//! board version.
+//!
+//! The leaderboard page and its JSON are the same for every anonymous
+//! reader of one query (season, sort metric, tag), and change only when
+//! the board version does (a publish, a hide, a new season: every server
+//! instance sees it in the database). So each is rendered once per version
+//! and kept, with an ETag naming the version and the query; a reader who
+//! already has it gets 304. Each request still reads the version, so
+//! another instance's publish shows at once.
+
+use crate::leaderboard::BoardQuery;
+use crate::routes::ApiError;
+use axum::body::Bytes;
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use sqlx::AnyPool;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// What a kept board is rendered as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Rendering {
+    /// The leaderboard page.
+    Html,
+    /// `GET /api/v1/leaderboard`.
+    Json,
+}
+
+impl Rendering {
+    fn content_type(self) -> &'static str {
+        match self {
+            Rendering::Html => "text/html; charset=utf-8",
+            Rendering::Json => "application/json",
+        }
+    }
+}
+
+/// A kept board's rendering and query.
+type Key = (Rendering, Option<i64>, Option<String>, Option<String>);
+
+struct Kept {
+    version: i64,
+    etag: HeaderValue,
+    body: Bytes,
+}
+
+/// Renderings kept at most: a query naming no existing metric or tag still
+/// renders, but past this nothing more is kept.
+pub const MAX_KEPT: usize = 256;
+
+/// The public boards rendered for anonymous readers.
+#[derive(Clone, Default)]
+pub struct PublicBoards(Arc<Mutex<HashMap<Key, Arc<Kept>>>>);
+
+impl PublicBoards {
+    /// The answer to an anonymous reader of `query` as `rendering`: the kept
+    /// rendering of the current board version (304 when `request` names its
+    /// ETag), or `render`'s, kept for the next reader.
+    pub async fn respond(
+        &self,
+        pool: &AnyPool,
+        rendering: Rendering,
+        query: &BoardQuery,
+        request: &HeaderMap,
+        render: impl std::future::Future<Output = Result<String, ApiError>>,
+    ) -> Result<Response, ApiError> {
+        let key = (rendering, query.season, query.sort.clone(), query.tag.clone());
+        let version = crate::results::board_version(pool).await?;
+        let kept = self.0.lock().ok().and_then(|k| k.get(&key).filter(|k| k.version == version).cloned());
+        let kept = match kept {
+            Some(kept) => kept,
+            None => self.keep(key, version, render.await?)?,
+        };
+        let fresh = request.get(header::IF_NONE_MATCH) == Some(&kept.etag);
+        let mut response = if fresh {
+            StatusCode::NOT_MODIFIED.into_response()
+        } else {
+            ([(header::CONTENT_TYPE, rendering.content_type())], kept.body.clone()).into_response()
+        };
+        let headers = response.headers_mut();
+        headers.insert(header::ETAG, kept.etag.clone());
+        // Asked again each time (a publish changes it at once), answered by 304 while unchanged.
+        headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+        Ok(response)
+    }
+
+    fn keep(&self, key: Key, version: i64, body: String) -> Result<Arc<Kept>, ApiError> {
+        use sha2::Digest;
+        let query = format!("{:x}", sha2::Sha256::digest(format!("{key:?}")));
+        let etag = HeaderValue::from_str(&format!("\"{version}-{}\"", &query[..16])).map_err(ApiError::internal)?;
+        let kept = Arc::new(Kept { version, etag, body: body.into() });
+        if let Ok(mut all) = self.0.lock() {
+            // Renderings of an older version go first.
+            all.retain(|_, k| k.version >= version);
+            if all.len() < MAX_KEPT || all.contains_key(&key) {
+                all.insert(key, kept.clone());
+            }
+        }
+        Ok(kept)
+    }
+}
