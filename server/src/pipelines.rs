@@ -282,20 +282,9 @@ pub async fn start(
     };
     let (pipeline_id, job_id) = (uuid::Uuid::new_v4().to_string(), uuid::Uuid::new_v4().to_string());
     let mut tx = state.pool.begin().await?;
-    sqlx::query(
-        "INSERT INTO pipelines (id, project_id, user_id, commit_sha, git_ref, variables, source, created_at) \
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
-    )
-    .bind(&pipeline_id)
-    .bind(&project.id)
-    .bind(&user.id)
-    .bind(commit)
-    .bind(git_ref)
-    .bind(request.variables().to_string())
-    .bind(source.as_str())
-    .bind(now_ms())
-    .execute(&mut *tx)
-    .await?;
+    let variables = request.variables().to_string();
+    insert_pipeline(&mut tx, &pipeline_id, (&project.id, &user.id), (commit, git_ref), &variables, source.as_str())
+        .await?;
     let new_job = crate::jobs::NewJob {
         id: &job_id,
         pipeline_id: &pipeline_id,
@@ -327,6 +316,34 @@ pub async fn start(
         mail_failure(state, user, &job).await;
     }
     Ok(Started { pipeline_id, job })
+}
+
+/// Creates the pipeline `id` of (project, user) at (commit, git ref), in
+/// its job's transaction. Reference jobs' pipelines name the reference's
+/// key and scene instead of a commit and a ref.
+pub(crate) async fn insert_pipeline(
+    tx: &mut sqlx::Transaction<'_, sqlx::Any>,
+    id: &str,
+    (project_id, user_id): (&str, &str),
+    (commit, git_ref): (&str, &str),
+    variables: &str,
+    source: &str,
+) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "INSERT INTO pipelines (id, project_id, user_id, commit_sha, git_ref, variables, source, created_at) \
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
+    )
+    .bind(id)
+    .bind(project_id)
+    .bind(user_id)
+    .bind(commit)
+    .bind(git_ref)
+    .bind(variables)
+    .bind(source)
+    .bind(now_ms())
+    .execute(&mut **tx)
+    .await?;
+    Ok(())
 }
 
 /// The most branches one push starts pipelines for: a push of 10 000

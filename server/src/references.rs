@@ -124,20 +124,8 @@ async fn queue_job(state: &AppState, key: &str, scene: &str, failed_job: Option<
     let (pipeline_id, job_id) = (uuid::Uuid::new_v4().to_string(), uuid::Uuid::new_v4().to_string());
     let message = format!("the reference of {scene}");
     let mut tx = state.pool.begin().await?;
-    sqlx::query(
-        "INSERT INTO pipelines (id, project_id, user_id, commit_sha, git_ref, variables, source, created_at) \
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
-    )
-    .bind(&pipeline_id)
-    .bind(&project.id)
-    .bind(&user.id)
-    .bind(key)
-    .bind(scene)
-    .bind("{}")
-    .bind("reference")
-    .bind(now_ms())
-    .execute(&mut *tx)
-    .await?;
+    crate::pipelines::insert_pipeline(&mut tx, &pipeline_id, (&project.id, &user.id), (key, scene), "{}", "reference")
+        .await?;
     let job = crate::jobs::NewJob {
         id: &job_id,
         pipeline_id: &pipeline_id,
