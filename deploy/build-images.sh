@@ -83,12 +83,7 @@ stage_renderer() {
 }
 
 declare -A tags
-for name in cpp python renderer; do
-    mkdir -p "$stage/$name"
-    cp "deploy/images/$name/Dockerfile" "$stage/$name/"
-    "stage_$name" "$stage/$name"
-    tags[$name]=$(build_image "$name" "$stage/$name" "$base")
-done
+build_images "$base" cpp python renderer
 
 mkdir -p "$(dirname "$manifest")"
 cat > "$manifest.tmp" <<JSON

@@ -67,12 +67,7 @@ stage_postgres() {
 }
 
 declare -A tags
-for name in server runner postgres; do
-    mkdir -p "$stage/$name"
-    cp "deploy/images/$name/Dockerfile" "$stage/$name/"
-    "stage_$name" "$stage/$name"
-    tags[$name]=$(build_image "$name" "$stage/$name" "$base")
-done
+build_images "$base" server runner postgres
 
 variables="FBKSD_IMAGE_SERVER=${tags[server]}
 FBKSD_IMAGE_RUNNER=${tags[runner]}

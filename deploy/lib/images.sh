@@ -30,3 +30,17 @@ build_image() {
     fi
     echo "$tag"
 }
+
+# build_images BASE NAME...: for each NAME, its Dockerfile
+# (deploy/images/NAME) and what stage_NAME puts beside it, in $stage/NAME,
+# built by build_image; the tags go into the caller's array `tags`.
+build_images() {
+    local base=$1 name
+    shift
+    for name in "$@"; do
+        mkdir -p "$stage/$name"
+        cp "deploy/images/$name/Dockerfile" "$stage/$name/"
+        "stage_$name" "$stage/$name"
+        tags[$name]=$(build_image "$name" "$stage/$name" "$base")
+    done
+}
