@@ -251,21 +251,11 @@ on_both_databases!(a_reference_is_made_once_for_every_runner, |db: Db| async mov
     assert!(answers.iter().all(|(s, a)| *s == 200 && a["state"] == "building"), "{answers:?}");
 
     // Only a runner with that scene gets the job, before any other.
-    let (status, _) = other
-        .post(
-            "runners/jobs",
-            json!({ "reference_keys": ["sha256:".to_string() + &"0".repeat(64)], "references_only": true }),
-        )
-        .await;
-    assert_eq!(status, 204);
-    let (status, claim) = maker.post("runners/jobs", json!({ "reference_keys": [key], "references_only": true })).await;
-    assert_eq!((status, &claim["job"]["kind"]), (200, &json!("reference")), "{claim}");
-    assert_eq!(claim["reference"], json!({ "key": key, "scene": "experimental/sphere" }));
-    let job = common::HeldJob {
-        id: claim["job"]["id"].as_str().unwrap().into(),
-        token: claim["token"].as_str().unwrap().into(),
-        body: claim.clone(),
-    };
+    let elsewhere = json!({ "reference_keys": ["sha256:".to_string() + &"0".repeat(64)], "references_only": true });
+    assert!(other.claim_with(elsewhere).await.is_none());
+    let job = maker.claim_with(json!({ "reference_keys": [key], "references_only": true })).await.unwrap();
+    assert_eq!(job.body["job"]["kind"], "reference", "{}", job.body);
+    assert_eq!(job.body["reference"], json!({ "key": key, "scene": "experimental/sphere" }));
 
     // Its end is refused until the reference is whole and its note makes the key.
     let (status, body) = job.finish(&maker, json!({ "state": "succeeded" })).await;
@@ -301,12 +291,7 @@ on_both_databases!(a_reference_is_made_once_for_every_runner, |db: Db| async mov
     let key2 = fbksd_exchange::scenes::reference_key("test renderer 1", 4, "sha256:other scene");
     let ask2 = json!({ "key": key2, "scene": "experimental/other" });
     let (_, first) = maker.post("runners/references", ask2.clone()).await;
-    let (_, claim) = maker.post("runners/jobs", json!({ "reference_keys": [key2] })).await;
-    let failing = common::HeldJob {
-        id: claim["job"]["id"].as_str().unwrap().into(),
-        token: claim["token"].as_str().unwrap().into(),
-        body: claim.clone(),
-    };
+    let failing = maker.claim_with(json!({ "reference_keys": [key2] })).await.unwrap();
     let (status, _) =
         failing.finish(&maker, json!({ "state": "failed", "reason": "crashed", "message": "renderer died" })).await;
     assert_eq!(status, 200);

@@ -317,11 +317,16 @@ impl FakeRunner {
 
     /// Claims a job, waiting up to `wait_seconds`.
     pub async fn claim(&self, wait_seconds: u64) -> Option<HeldJob> {
+        self.claim_with(serde_json::json!({ "wait_seconds": wait_seconds })).await
+    }
+
+    /// Claims a job as the claim request `request` says (reference keys, …).
+    pub async fn claim_with(&self, request: serde_json::Value) -> Option<HeldJob> {
         let response = self
             .client
             .post(format!("{}/api/v1/runners/jobs", self.url))
             .bearer_auth(&self.token)
-            .json(&serde_json::json!({ "wait_seconds": wait_seconds }))
+            .json(&request)
             .send()
             .await
             .unwrap();
