@@ -5,7 +5,7 @@
 use anyhow::{bail, Context};
 use clap::Subcommand;
 use fbksd_iqa::image::Image;
-use fbksd_iqa::{evaluate, Metric, ValueRecord};
+use fbksd_iqa::{evaluate, evaluate_against, Metric, Reference, ValueRecord};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -35,9 +35,9 @@ struct MetricArgs {
     /// Write the error map (PNG) here.
     #[arg(long)]
     map_file: Option<PathBuf>,
-    /// Reference image (OpenEXR).
+    /// Reference image (OpenEXR, or an 8-bit sRGB PNG).
     reference: PathBuf,
-    /// Test image (OpenEXR).
+    /// Test image (OpenEXR, or an 8-bit sRGB PNG).
     test: PathBuf,
 }
 
@@ -61,9 +61,18 @@ fn one(args: MetricArgs) -> anyhow::Result<()> {
         let known: Vec<_> = Metric::ALL.iter().map(|m| m.acronym()).collect();
         bail!("unknown metric {:?} (known: {})", args.metric, known.join(", "));
     };
-    let reference = Image::read(&args.reference).with_context(|| format!("reference {}", args.reference.display()))?;
-    let test = Image::read(&args.test).with_context(|| format!("test image {}", args.test.display()))?;
-    let e = evaluate(metric, &reference, &test)?;
+    // The reference is prepared while the test image decodes.
+    let (reference, test) = rayon::join(
+        || {
+            let reference = Reference::new(Image::read(&args.reference)?);
+            reference.prepare(metric);
+            Ok::<_, std::io::Error>(reference)
+        },
+        || Image::read(&args.test),
+    );
+    let reference = reference.with_context(|| format!("reference {}", args.reference.display()))?;
+    let test = test.with_context(|| format!("test image {}", args.test.display()))?;
+    let e = evaluate_against(metric, &reference, &test)?;
     let record = ValueRecord {
         metric: metric.acronym().into(),
         value: e.value,
@@ -134,6 +143,10 @@ fn bench(size: u32) -> anyhow::Result<()> {
             ssim_times = Some((times[0], value));
         }
     }
+    match against_flip_evaluator(&r, &t) {
+        Ok(lines) => lines.iter().for_each(|l| println!("{l}")),
+        Err(e) => println!("(flip-evaluator not measured: {e})"),
+    }
     if let Some((ours, value)) = ssim_times {
         match scikit_image_ssim(&r, &t) {
             Ok((theirs, their_value)) => println!(
@@ -146,6 +159,69 @@ fn bench(size: u32) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Times `fbksd iqa` and NVIDIA's `flip` (flip-evaluator) as processes on
+/// the same files, best of 3 wall times each: HDR-ꟻLIP on the pair scaled
+/// to an HDR range (OpenEXR), LDR-ꟻLIP on its 8-bit sRGB PNGs.
+fn against_flip_evaluator(r: &Image, t: &Image) -> anyhow::Result<Vec<String>> {
+    use fbksd_iqa::image::{srgb, write_exr};
+    let dir = tempfile::tempdir()?;
+    let path = |name: &str| dir.path().join(name);
+    let (w, h) = (r.width, r.height);
+    for (name, img) in [("ref", r), ("test", t)] {
+        let hdr: Vec<f32> = img.rgb.iter().map(|v| 4.0 * v).collect();
+        write_exr(&path(&format!("{name}-hdr.exr")), w, h, &hdr)?;
+        let bytes: Vec<u8> = img.rgb.iter().map(|v| (srgb(*v) * 255.0).round() as u8).collect();
+        image::RgbImage::from_raw(w, h, bytes).context("png size")?.save(path(&format!("{name}.png")))?;
+    }
+    let best_of_3 = |command: &mut std::process::Command| -> anyhow::Result<(f64, String)> {
+        let mut best = (f64::INFINITY, String::new());
+        for _ in 0..3 {
+            let start = Instant::now();
+            let out = command.output().with_context(|| format!("{command:?}"))?;
+            let seconds = start.elapsed().as_secs_f64();
+            if !out.status.success() {
+                bail!("{command:?}: {}", String::from_utf8_lossy(&out.stderr).trim());
+            }
+            if seconds < best.0 {
+                best = (seconds, String::from_utf8_lossy(&out.stdout).into_owned());
+            }
+        }
+        Ok(best)
+    };
+    let ours_exe = std::env::current_exe()?;
+    let mut lines = vec![format!("as processes on {w}×{h} files, best of 3 wall times:")];
+    for (metric, suffix) in [("HDR-FLIP", "-hdr.exr"), ("FLIP", ".png")] {
+        let (ours, ours_out) = best_of_3(std::process::Command::new(&ours_exe).args([
+            "iqa".as_ref(),
+            metric.as_ref(),
+            path(&format!("ref{suffix}")).as_os_str(),
+            path(&format!("test{suffix}")).as_os_str(),
+        ]))?;
+        let ours_value = serde_json::from_str::<ValueRecord>(ours_out.trim())?.value;
+        let (theirs, theirs_out) = best_of_3(
+            std::process::Command::new("flip")
+                .arg("-r")
+                .arg(path(&format!("ref{suffix}")))
+                .arg("-t")
+                .arg(path(&format!("test{suffix}")))
+                .args(["-nerm", "-nexm", "-v", "1"])
+                .current_dir(dir.path()),
+        )?;
+        let theirs_value = theirs_out
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("Mean:").map(|v| v.trim().parse::<f64>()))
+            .context("flip printed no mean")??;
+        lines.push(format!(
+            "{metric:<9} fbksd iqa {:.0} ms, flip-evaluator {:.0} ms: {:.1}× faster; values {ours_value:.6} and {theirs_value:.6} (differ by {:.1e})",
+            ours * 1e3,
+            theirs * 1e3,
+            theirs / ours,
+            (ours_value - theirs_value).abs()
+        ));
+    }
+    Ok(lines)
 }
 
 /// Times scikit-image's SSIM (best of 3, one thread) on the same tone-mapped pair.

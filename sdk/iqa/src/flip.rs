@@ -21,10 +21,17 @@
 //! luminance (at least two, one stop apart at most), tone-maps each with
 //! ACES, runs LDR-ꟻLIP, and keeps the per-pixel maximum.
 //!
-//! Departures, both documented: the mean is summed in f64 (the package sums
+//! Departures, all documented: the mean is summed in f64 (the package sums
 //! in f32, which drifts on large images by about 1e−6); an all-black
 //! reference, on which the package stops the process, uses the single
-//! exposure 0.
+//! exposure 0; cube roots and powers are our own polynomial forms (a few
+//! ulps from the library's `powf`), which vectorise.
+//!
+//! Speed: each image is filtered in bands of rows (the seven row filters,
+//! then the eight column filters, with the colour conversions fused in) that
+//! stay in cache, at AVX2 where the CPU has it; a reference is prepared once
+//! per exposure ([`FlipReference`]) and compared with any number of test
+//! images, whose prepared bands are compared as soon as they are made.
 
 // The published constants are kept as written, even where f32 holds fewer digits.
 #![allow(clippy::excessive_precision)]
@@ -37,9 +44,6 @@ const PI: f32 = std::f32::consts::PI;
 pub fn default_ppd() -> f32 {
     0.7f32 * (3840.0f32 / 0.7f32) * (PI / 180.0f32)
 }
-
-/// A planar image: one Vec per channel.
-type Planes = [Vec<f32>; 3];
 
 const TO_XYZ: [[f32; 3]; 3] = [
     [10135552.0 / 24577794.0, 8788810.0 / 24577794.0, 4435075.0 / 24577794.0],
@@ -54,71 +58,111 @@ const FROM_XYZ: [[f32; 3]; 3] = [
 const WHITE: [f32; 3] = [0.950428545, 1.0, 1.088900371];
 const INV_WHITE: [f32; 3] = [1.052156925, 1.0, 0.918357670];
 
+#[inline(always)]
 fn mat(m: &[[f32; 3]; 3], v: [f32; 3]) -> [f32; 3] {
-    std::array::from_fn(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
+    let row = |i: usize| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2];
+    [row(0), row(1), row(2)]
 }
 
+#[inline(always)]
 fn xyz_to_ycxcz(v: [f32; 3]) -> [f32; 3] {
     let (x, y, z) = (v[0] * INV_WHITE[0], v[1] * INV_WHITE[1], v[2] * INV_WHITE[2]);
     [116.0 * y - 16.0, 500.0 * (x - y), 200.0 * (y - z)]
 }
 
+#[inline(always)]
 fn ycxcz_to_xyz(v: [f32; 3]) -> [f32; 3] {
     let yp = (v[0] + 16.0) / 116.0;
     let (cx, cz) = (v[1] / 500.0, v[2] / 200.0);
     [(yp + cx) * WHITE[0], yp * WHITE[1], (yp - cz) * WHITE[2]]
 }
 
-fn xyz_to_lab(v: [f32; 3]) -> [f32; 3] {
-    let delta = 6.0f32 / 29.0;
-    let delta_square = delta * delta;
-    let delta_cube = delta * delta_square;
-    let factor = 1.0 / (3.0 * delta_square);
+/// The cube root of `t` ≥ 0.008 (CIELab's cube branch), within an ulp or two
+/// of `powf(t, 1/3)`: a guess from the exponent bits, refined by three Newton
+/// steps. Unlike a call to the library's `powf`, it vectorises.
+#[inline(always)]
+fn cbrt(t: f32) -> f32 {
+    // Dividing the bit pattern by 3 (in f32, exact enough for a guess) divides the exponent by 3.
+    let mut y = f32::from_bits(((t.to_bits() as i32 as f32 * (1.0 / 3.0)) as i32 + 0x2A51_4067) as u32);
+    for _ in 0..3 {
+        y = (2.0 * y + t / (y * y)) * (1.0 / 3.0);
+    }
+    y
+}
+
+/// `x^y` for `x` ≥ 0 and finite `y`, within a few ulps of `powf` (`0^0` is
+/// 1), as `2^(y · log₂ x)` from polynomials that vectorise, where the
+/// library's `powf` is a call per value.
+#[inline(always)]
+fn pow(x: f32, y: f32) -> f32 {
+    // log₂ x: exponent and mantissa m in [√½, √2); ln m = 2 atanh(s), s = (m − 1)/(m + 1), |s| ≤ 0.172.
+    let tiny = x < f32::MIN_POSITIVE;
+    let scaled = if tiny { x * 8_388_608.0 } else { x };
+    let bits = scaled.to_bits();
+    let mantissa = f32::from_bits((bits & 0x007F_FFFF) | 0x3F80_0000);
+    let high = mantissa > std::f32::consts::SQRT_2;
+    let m = if high { mantissa * 0.5 } else { mantissa };
+    let exponent = ((bits >> 23) & 0xFF) as i32 - 127 + high as i32 - if tiny { 23 } else { 0 };
+    let sv = (m - 1.0) / (m + 1.0);
+    let s2 = sv * sv;
+    let ln_m = sv * (2.0 + s2 * (2.0 / 3.0 + s2 * (2.0 / 5.0 + s2 * (2.0 / 7.0 + s2 * (2.0 / 9.0)))));
+    let log2 = exponent as f32 + ln_m * std::f32::consts::LOG2_E;
+    // 2^z: z = n + f, |f| ≤ ½, 2^f by its series to the 7th power; 2^n in two halves so that
+    // results down to the subnormals come out right.
+    let z = (y * log2).clamp(-200.0, 127.9);
+    let n = z.round();
+    let t = (z - n) * std::f32::consts::LN_2;
+    let p = 1.0
+        + t * (1.0
+            + t * (1.0 / 2.0
+                + t * (1.0 / 6.0 + t * (1.0 / 24.0 + t * (1.0 / 120.0 + t * (1.0 / 720.0 + t * (1.0 / 5040.0)))))));
+    let n = n as i32;
+    let (n1, n2) = (n >> 1, n - (n >> 1));
+    let two_to = |k: i32| f32::from_bits(((k + 127) as u32) << 23);
+    let v = p * two_to(n1) * two_to(n2);
+    if x == 0.0 {
+        if y > 0.0 {
+            0.0
+        } else if y == 0.0 {
+            1.0
+        } else {
+            f32::INFINITY
+        }
+    } else {
+        v
+    }
+}
+
+/// CIELab's f(t): both branches computed and one chosen, so the pixel loop vectorises.
+#[inline(always)]
+fn lab_f(t: f32) -> f32 {
+    const DELTA: f32 = 6.0 / 29.0;
+    let delta_cube = DELTA * (DELTA * DELTA);
+    let factor = 1.0 / (3.0 * (DELTA * DELTA));
     let term = 4.0f32 / 29.0;
-    let f = |t: f32| if t > delta_cube { t.powf(1.0 / 3.0) } else { factor * t + term };
-    let (fx, fy, fz) = (f(v[0] * INV_WHITE[0]), f(v[1] * INV_WHITE[1]), f(v[2] * INV_WHITE[2]));
+    let root = cbrt(t.max(delta_cube));
+    if t > delta_cube {
+        root
+    } else {
+        factor * t + term
+    }
+}
+
+#[inline(always)]
+fn xyz_to_lab(v: [f32; 3]) -> [f32; 3] {
+    let (fx, fy, fz) = (lab_f(v[0] * INV_WHITE[0]), lab_f(v[1] * INV_WHITE[1]), lab_f(v[2] * INV_WHITE[2]));
     [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
 }
 
+#[inline(always)]
 fn hunt(lab: [f32; 3]) -> [f32; 3] {
     [lab[0], (0.01 * lab[0]) * lab[1], (0.01 * lab[0]) * lab[2]]
 }
 
+#[inline(always)]
 fn hyab(a: [f32; 3], b: [f32; 3]) -> f32 {
     let (da, db) = (a[1] - b[1], a[2] - b[2]);
     (a[0] - b[0]).abs() + (da * da + db * db).sqrt()
-}
-
-/// A 1-D correlation with clamp-to-edge borders, rows or columns.
-fn filter_rows(input: &[f32], w: usize, h: usize, k: &[f32]) -> Vec<f32> {
-    let r = k.len() / 2;
-    let mut out = vec![0f32; w * h];
-    out.par_chunks_mut(w).zip(input.par_chunks(w)).for_each(|(o, row)| {
-        for (x, v) in o.iter_mut().enumerate() {
-            let mut sum = 0f32;
-            for (j, kw) in k.iter().enumerate() {
-                let xi = (x as isize + j as isize - r as isize).clamp(0, w as isize - 1) as usize;
-                sum += kw * row[xi];
-            }
-            *v = sum;
-        }
-    });
-    out
-}
-
-fn filter_columns(input: &[f32], w: usize, h: usize, k: &[f32]) -> Vec<f32> {
-    let r = k.len() / 2;
-    let mut out = vec![0f32; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, o)| {
-        // Accumulate whole rows in tap order: each pixel still adds its terms in order.
-        for (j, kw) in k.iter().enumerate() {
-            let yi = (y as isize + j as isize - r as isize).clamp(0, h as isize - 1) as usize;
-            for (v, s) in o.iter_mut().zip(&input[yi * w..yi * w + w]) {
-                *v += kw * s;
-            }
-        }
-    });
-    out
 }
 
 /// The contrast sensitivity kernels for a ppd.
@@ -187,53 +231,15 @@ impl Kernels {
         ddg.iter_mut().for_each(|v| *v /= if *v > 0.0 { ddg_pos } else { ddg_neg });
         Kernels { y, cx, cz1, cz2, g, dg, ddg }
     }
-}
 
-/// YCxCz planes of a linear RGB image.
-fn ycxcz_planes(rgb: &[f32]) -> Planes {
-    let n = rgb.len() / 3;
-    let mut planes: Planes = std::array::from_fn(|_| vec![0f32; n]);
-    for (i, p) in rgb.chunks_exact(3).enumerate() {
-        let v = xyz_to_ycxcz(mat(&TO_XYZ, [p[0], p[1], p[2]]));
-        for c in 0..3 {
-            planes[c][i] = v[c];
-        }
+    /// Radius of the colour kernels and of the feature kernels.
+    fn radii(&self) -> (usize, usize) {
+        (self.y.len() / 2, self.g.len() / 2)
     }
-    planes
-}
-
-/// The Hunt-adjusted Lab of the CSF-filtered image, per pixel.
-fn filtered_hunt(planes: &Planes, w: usize, h: usize, k: &Kernels) -> Vec<[f32; 3]> {
-    let sep = |p: &[f32], kk: &[f32]| filter_columns(&filter_rows(p, w, h, kk), w, h, kk);
-    let y = sep(&planes[0], &k.y);
-    let cx = sep(&planes[1], &k.cx);
-    let (cz1, cz2) = (sep(&planes[2], &k.cz1), sep(&planes[2], &k.cz2));
-    (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let rgb = mat(&FROM_XYZ, ycxcz_to_xyz([y[i], cx[i], cz1[i] + cz2[i]]));
-            let clamped = rgb.map(clamp01);
-            hunt(xyz_to_lab(mat(&TO_XYZ, clamped)))
-        })
-        .collect()
-}
-
-/// Edges and points of the normalised luminance, per pixel.
-fn features(yc: &[f32], w: usize, h: usize, k: &Kernels) -> (Vec<f32>, Vec<f32>) {
-    let yn: Vec<f32> = yc.iter().map(|v| v * (1.0 / 116.0) + 16.0 / 116.0).collect();
-    let hd = filter_rows(&yn, w, h, &k.dg);
-    let hdd = filter_rows(&yn, w, h, &k.ddg);
-    let hg = filter_rows(&yn, w, h, &k.g);
-    let dx = filter_columns(&hd, w, h, &k.g);
-    let ddx = filter_columns(&hdd, w, h, &k.g);
-    let dy = filter_columns(&hg, w, h, &k.dg);
-    let ddy = filter_columns(&hg, w, h, &k.ddg);
-    let edge = dx.iter().zip(&dy).map(|(a, b)| (a * a + b * b).sqrt()).collect();
-    let point = ddx.iter().zip(&ddy).map(|(a, b)| (a * a + b * b).sqrt()).collect();
-    (edge, point)
 }
 
 /// `min(max(v, 0), 1)` with NaN becoming 0, as the reference does it.
+#[inline(always)]
 fn clamp01(v: f32) -> f32 {
     let v = if v > 0.0 { v } else { 0.0 };
     if v > 1.0 {
@@ -243,38 +249,358 @@ fn clamp01(v: f32) -> f32 {
     }
 }
 
-/// The LDR-ꟻLIP error map of two linear RGB images (values clamped to [0, 1]).
-pub fn flip_ldr_map(reference: &[f32], test: &[f32], w: usize, h: usize, ppd: f32) -> Vec<f32> {
-    let k = Kernels::new(ppd);
-    let clamp = |img: &[f32]| img.iter().map(|v| clamp01(*v)).collect::<Vec<f32>>();
-    let (r, t) = (ycxcz_planes(&clamp(reference)), ycxcz_planes(&clamp(test)));
-    let (hr, ht) = (filtered_hunt(&r, w, h, &k), filtered_hunt(&t, w, h, &k));
-    let (er, pr) = features(&r[0], w, h, &k);
-    let (et, pt) = features(&t[0], w, h, &k);
+/// ACES (fitted, with the 0.6 pre-exposure cancelled), per channel.
+const ACES: [f32; 6] = [0.6 * 0.6 * 2.51, 0.6 * 0.03, 0.0, 0.6 * 0.6 * 2.43, 0.6 * 0.59, 0.14];
 
+#[inline(always)]
+fn tone_map_aces(c: f32) -> f32 {
+    let k = ACES;
+    ((c * c) * k[0] + c * k[1] + k[2]) / ((c * c) * k[3] + c * k[4] + k[5])
+}
+
+/// How linear values enter LDR-ꟻLIP: clamped (LDR), or scaled by an
+/// exposure, ACES tone-mapped and clamped (one exposure of HDR-ꟻLIP).
+#[derive(Debug, Clone, Copy)]
+enum Exposure {
+    Ldr,
+    Hdr(f32),
+}
+
+impl Exposure {
+    #[inline(always)]
+    fn apply(self, v: f32) -> f32 {
+        match self {
+            Exposure::Ldr => clamp01(v),
+            Exposure::Hdr(m) => clamp01(tone_map_aces(v * m)),
+        }
+    }
+}
+
+/// Row-filtered planes per image row: the CSF kernels on Y, Cx and Cz (two),
+/// and the feature kernels (dg, ddg, g) on the normalised luminance.
+const ROW_PLANES: usize = 7;
+/// What [`Prepared`] keeps per pixel: Hunt-adjusted L, a, b, edge, point.
+const PREPARED_PLANES: usize = 5;
+
+/// What ꟻLIP compares of one image at one exposure: per pixel the
+/// Hunt-adjusted Lab of the CSF-filtered image and the edge and point
+/// features of its normalised luminance, stored row by row
+/// (`PREPARED_PLANES` runs of `w` values per row). A reference's are made
+/// once and compared with any number of test images ([`FlipReference`]).
+struct Prepared {
+    rows: Vec<f32>,
+}
+
+/// `out[x] = Σⱼ k[j] · src(j)[x]`, summed in tap order per pixel (as the
+/// reference implementation sums), a whole row per tap: the additions of
+/// neighbouring pixels are independent, so they vectorise and pipeline.
+/// (Holding sums in registers across the taps measured slower: each tap's
+/// addition then waits for the last.)
+#[inline(always)]
+fn correlate<'s>(out: &mut [f32], k: &[f32], src: impl Fn(usize) -> &'s [f32]) {
+    let n = out.len();
+    out.fill(0.0);
+    for (j, kw) in k.iter().enumerate() {
+        for (o, v) in out.iter_mut().zip(&src(j)[..n]) {
+            *o += kw * v;
+        }
+    }
+}
+
+/// Per-thread scratch of [`band_pass`]: the four padded input rows, the
+/// row-filtered planes of the band's input rows, the column accumulators and,
+/// for a test image, the band's prepared rows.
+struct BandScratch {
+    padded: [Vec<f32>; 4],
+    rows: Vec<f32>,
+    acc: Vec<f32>,
+    prepared: Vec<f32>,
+}
+
+impl BandScratch {
+    fn new(w: usize, k: &Kernels) -> BandScratch {
+        let pad = k.radii().0.max(k.radii().1);
+        BandScratch {
+            padded: std::array::from_fn(|_| vec![0f32; w + 2 * pad]),
+            rows: Vec::new(),
+            acc: vec![0f32; 8 * w],
+            prepared: Vec::new(),
+        }
+    }
+}
+
+/// The row pass of one image row: colour transform and the seven row filters.
+#[inline(always)]
+fn row_pass(rgb_row: &[f32], exposure: Exposure, k: &Kernels, padded: &mut [Vec<f32>; 4], out: &mut [f32]) {
+    let w = rgb_row.len() / 3;
+    let (rc, rf) = k.radii();
+    let pad = rc.max(rf);
+    let [py, pcx, pcz, pyn] = padded;
+    // The channels apart first (into the planes' tails, not yet used), so
+    // that the colour loop reads unit strides and vectorises.
+    for (x, p) in rgb_row.chunks_exact(3).enumerate() {
+        (py[pad + x], pcx[pad + x], pcz[pad + x]) = (p[0], p[1], p[2]);
+    }
+    for x in pad..pad + w {
+        let rgb = [exposure.apply(py[x]), exposure.apply(pcx[x]), exposure.apply(pcz[x])];
+        let v = xyz_to_ycxcz(mat(&TO_XYZ, rgb));
+        (py[x], pcx[x], pcz[x]) = (v[0], v[1], v[2]);
+        pyn[x] = v[0] * (1.0 / 116.0) + 16.0 / 116.0;
+    }
+    // Clamp-to-edge borders.
+    for plane in [&mut *py, &mut *pcx, &mut *pcz, &mut *pyn] {
+        let (first, last) = (plane[pad], plane[pad + w - 1]);
+        plane[..pad].fill(first);
+        plane[pad + w..].fill(last);
+    }
+    let mut planes = out.chunks_exact_mut(w);
+    let mut next = || planes.next().expect("seven row planes");
+    fn shifted(plane: &[f32], pad: usize, r: usize, j: usize) -> &[f32] {
+        &plane[pad - r + j..]
+    }
+    let (py, pcx, pcz, pyn) = (&*py, &*pcx, &*pcz, &*pyn);
+    correlate(next(), &k.y, |j| shifted(py, pad, rc, j));
+    correlate(next(), &k.cx, |j| shifted(pcx, pad, rc, j));
+    correlate(next(), &k.cz1, |j| shifted(pcz, pad, rc, j));
+    correlate(next(), &k.cz2, |j| shifted(pcz, pad, rc, j));
+    correlate(next(), &k.dg, |j| shifted(pyn, pad, rf, j));
+    correlate(next(), &k.ddg, |j| shifted(pyn, pad, rf, j));
+    correlate(next(), &k.g, |j| shifted(pyn, pad, rf, j));
+}
+
+/// The column pass of output row `y`, from the row-filtered planes of input
+/// rows `first..`: the eight column filters, then the per-pixel colour
+/// conversion and feature magnitudes.
+#[inline(always)]
+fn column_pass(b: &Bands<'_>, rows: &[f32], first: usize, y: usize, acc: &mut [f32], out: &mut [f32]) {
+    let (w, h, k) = (b.w, b.h, b.kernels);
+    let (rc, rf) = k.radii();
+    let plane = |yi: usize, p: usize| {
+        let start = ((yi - first) * ROW_PLANES + p) * w;
+        &rows[start..start + w]
+    };
+    let source_row = |j: usize, r: usize| (y as isize + j as isize - r as isize).clamp(0, h as isize - 1) as usize;
+    let (a0, rest) = acc.split_at_mut(w);
+    let (a1, rest) = rest.split_at_mut(w);
+    let (a2, rest) = rest.split_at_mut(w);
+    let (a3, rest) = rest.split_at_mut(w);
+    let (a4, rest) = rest.split_at_mut(w);
+    let (a5, rest) = rest.split_at_mut(w);
+    let (a6, a7) = rest.split_at_mut(w);
+    let colour = |p: usize| move |j: usize| plane(source_row(j, rc), p);
+    let feature = |p: usize| move |j: usize| plane(source_row(j, rf), p);
+    correlate(a0, &k.y, colour(0));
+    correlate(a1, &k.cx, colour(1));
+    correlate(a2, &k.cz1, colour(2));
+    correlate(a3, &k.cz2, colour(3));
+    correlate(a4, &k.g, feature(4)); // dx: dg along the row, g down the column
+    correlate(a5, &k.g, feature(5)); // ddx
+    correlate(a6, &k.dg, feature(6)); // dy: g along the row, dg down the column
+    correlate(a7, &k.ddg, feature(6)); // ddy
+    let (lab, features) = out.split_at_mut(3 * w);
+    let (l, rest) = lab.split_at_mut(w);
+    let (a, b) = rest.split_at_mut(w);
+    let (edge, point) = features.split_at_mut(w);
+    for x in 0..w {
+        let rgb = mat(&FROM_XYZ, ycxcz_to_xyz([a0[x], a1[x], a2[x] + a3[x]]));
+        let v = hunt(xyz_to_lab(mat(&TO_XYZ, [clamp01(rgb[0]), clamp01(rgb[1]), clamp01(rgb[2])])));
+        (l[x], a[x], b[x]) = (v[0], v[1], v[2]);
+        edge[x] = (a4[x] * a4[x] + a6[x] * a6[x]).sqrt();
+        point[x] = (a5[x] * a5[x] + a7[x] * a7[x]).sqrt();
+    }
+}
+
+/// Prepares the output rows `y0..` of one band (`out` holds
+/// `PREPARED_PLANES · w` values per row): the row pass of every input row
+/// the band's column filters reach, then the column pass of each output
+/// row. Bands overlap by the filter radius on each side; that recomputation
+/// buys a working set that stays in cache.
+#[inline(always)]
+fn band_pass(b: &Bands<'_>, y0: usize, s: &mut BandScratch, out: &mut [f32]) {
+    let (rgb, w, h, e, k) = (b.rgb, b.w, b.h, b.exposure, b.kernels);
+    let reach = k.radii().0.max(k.radii().1);
+    let count = out.len() / (PREPARED_PLANES * w);
+    let (first, last) = (y0.saturating_sub(reach), (y0 + count + reach).min(h));
+    s.rows.resize((last - first) * ROW_PLANES * w, 0.0);
+    for (yi, planes) in (first..last).zip(s.rows.chunks_exact_mut(ROW_PLANES * w)) {
+        row_pass(&rgb[yi * 3 * w..(yi + 1) * 3 * w], e, k, &mut s.padded, planes);
+    }
+    for (i, row) in out.chunks_exact_mut(PREPARED_PLANES * w).enumerate() {
+        column_pass(b, &s.rows, first, y0 + i, &mut s.acc, row);
+    }
+}
+
+/// Whether the passes may run their AVX2 and FMA builds (the values are the
+/// same: Rust never fuses a multiply and an add on its own).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma");
+    #[allow(unreachable_code)]
+    false
+}
+
+/// [`band_pass`] and [`compare_row`] compiled for AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::*;
+
+    /// # Safety
+    /// The CPU must support AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn band_pass(b: &Bands<'_>, y0: usize, s: &mut BandScratch, out: &mut [f32]) {
+        super::band_pass(b, y0, s, out)
+    }
+
+    /// # Safety
+    /// The CPU must support AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn compare_row(r: &[f32], t: &[f32], out: &mut [f32]) {
+        super::compare_row(r, t, out)
+    }
+}
+
+/// How one image is prepared, band by band, at the best instruction set.
+struct Bands<'a> {
+    rgb: &'a [f32],
+    w: usize,
+    h: usize,
+    exposure: Exposure,
+    kernels: &'a Kernels,
+    fast: bool,
+    /// Output rows per band: four bands per thread, enough to spread the work.
+    rows: usize,
+}
+
+impl<'a> Bands<'a> {
+    fn new(rgb: &'a [f32], w: usize, h: usize, exposure: Exposure, kernels: &'a Kernels) -> Bands<'a> {
+        let rows = h.div_ceil(4 * rayon::current_num_threads()).max(32).min(h.max(1));
+        Bands { rgb, w, h, exposure, kernels, fast: has_avx2(), rows }
+    }
+
+    fn scratch(&self) -> BandScratch {
+        BandScratch::new(self.w, self.kernels)
+    }
+
+    /// Prepares band `b` into `out`.
+    fn run(&self, b: usize, s: &mut BandScratch, out: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.fast {
+            // SAFETY: has_avx2 detected the features.
+            return unsafe { avx2::band_pass(self, b * self.rows, s, out) };
+        }
+        band_pass(self, b * self.rows, s, out)
+    }
+
+    fn compare(&self, r: &[f32], t: &[f32], out: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.fast {
+            // SAFETY: has_avx2 detected the features.
+            return unsafe { avx2::compare_row(r, t, out) };
+        }
+        compare_row(r, t, out)
+    }
+
+    /// The whole image prepared.
+    fn prepare(&self) -> Prepared {
+        let stride = PREPARED_PLANES * self.w;
+        let mut rows = vec![0f32; stride * self.h];
+        rows.par_chunks_mut(stride * self.rows)
+            .enumerate()
+            .for_each_init(|| self.scratch(), |s, (b, out)| self.run(b, s, out));
+        Prepared { rows }
+    }
+
+    /// Prepares each band and compares it with the reference's at once, so
+    /// the test image is never held prepared in full.
+    fn compare_into(&self, reference: &Prepared, map: &mut [f32]) {
+        let stride = PREPARED_PLANES * self.w;
+        let bands = map.par_chunks_mut(self.w * self.rows).zip(reference.rows.par_chunks(stride * self.rows));
+        bands.enumerate().for_each_init(
+            || self.scratch(),
+            |s, (b, (out, r))| {
+                let mut prepared = std::mem::take(&mut s.prepared);
+                prepared.resize(r.len(), 0.0);
+                self.run(b, s, &mut prepared);
+                for ((o, r), t) in out.chunks_mut(self.w).zip(r.chunks(stride)).zip(prepared.chunks(stride)) {
+                    self.compare(r, t, o);
+                }
+                s.prepared = prepared;
+            },
+        );
+    }
+}
+
+/// Per-pixel ꟻLIP of one row of a prepared reference against the same row
+/// of a prepared test image, kept where larger than `out`'s value
+/// (HDR-ꟻLIP's maximum over exposures).
+#[inline(always)]
+fn compare_row(r: &[f32], t: &[f32], out: &mut [f32]) {
+    let w = out.len();
     // The largest colour difference: pure green against pure blue.
     let green = hunt(xyz_to_lab(mat(&TO_XYZ, [0.0, 1.0, 0.0])));
     let blue = hunt(xyz_to_lab(mat(&TO_XYZ, [0.0, 0.0, 1.0])));
     let cmax = hyab(green, blue).powf(0.7);
     let (pc, ptt) = (0.4f32, 0.95f32);
     let pccmax = pc * cmax;
-    (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let mut cd = hyab(hr[i], ht[i]).powf(0.7);
-            cd = if cd < pccmax { cd * (ptt / pccmax) } else { ptt + ((cd - pccmax) / (cmax - pccmax)) * (1.0 - ptt) };
-            let fd = ((1.0f32 / 2.0f32.sqrt()) * (er[i] - et[i]).abs().max((pr[i] - pt[i]).abs())).powf(0.5);
-            cd.powf(1.0 - fd)
-        })
-        .collect()
+    let p = |img: &[f32], plane: usize, x: usize| img[plane * w + x];
+    for (x, o) in out.iter_mut().enumerate() {
+        let lab = |img: &[f32]| [p(img, 0, x), p(img, 1, x), p(img, 2, x)];
+        let mut cd = pow(hyab(lab(r), lab(t)), 0.7);
+        cd = if cd < pccmax { cd * (ptt / pccmax) } else { ptt + ((cd - pccmax) / (cmax - pccmax)) * (1.0 - ptt) };
+        let (de, dp) = ((p(r, 3, x) - p(t, 3, x)).abs(), (p(r, 4, x) - p(t, 4, x)).abs());
+        let fd = ((1.0f32 / 2.0f32.sqrt()) * de.max(dp)).sqrt();
+        let v = pow(cd, 1.0 - fd);
+        if v > *o {
+            *o = v;
+        }
+    }
 }
 
-/// ACES (fitted, with the 0.6 pre-exposure cancelled), per channel.
-const ACES: [f32; 6] = [0.6 * 0.6 * 2.51, 0.6 * 0.03, 0.0, 0.6 * 0.6 * 2.43, 0.6 * 0.59, 0.14];
+/// A reference made ready for ꟻLIP: prepared at each exposure once, then
+/// compared with any number of test images of its size.
+pub struct FlipReference {
+    w: usize,
+    h: usize,
+    kernels: Kernels,
+    exposures: Vec<(Exposure, Prepared)>,
+}
 
-fn tone_map_aces(c: f32) -> f32 {
-    let k = ACES;
-    ((c * c) * k[0] + c * k[1] + k[2]) / ((c * c) * k[3] + c * k[4] + k[5])
+impl FlipReference {
+    /// For LDR-ꟻLIP (values clamped to [0, 1]).
+    pub fn ldr(reference: &[f32], w: usize, h: usize, ppd: f32) -> FlipReference {
+        FlipReference::new(reference, w, h, ppd, vec![Exposure::Ldr])
+    }
+
+    /// For HDR-ꟻLIP, at the exposures the reference's luminance gives ([`exposures`]).
+    pub fn hdr(reference: &[f32], w: usize, h: usize, ppd: f32) -> FlipReference {
+        let (start, stop, count) = exposures(reference);
+        let step = (stop - start) / (count - 1) as f32;
+        let list = (0..count).map(|i| Exposure::Hdr(2f32.powf(start + i as f32 * step))).collect();
+        FlipReference::new(reference, w, h, ppd, list)
+    }
+
+    fn new(reference: &[f32], w: usize, h: usize, ppd: f32, list: Vec<Exposure>) -> FlipReference {
+        assert_eq!(reference.len(), 3 * w * h, "ꟻLIP: the reference is not {w}×{h}");
+        let kernels = Kernels::new(ppd);
+        let exposures = list.into_iter().map(|e| (e, Bands::new(reference, w, h, e, &kernels).prepare())).collect();
+        FlipReference { w, h, kernels, exposures }
+    }
+
+    /// The error map of `test` (linear RGB, the reference's size).
+    pub fn map(&self, test: &[f32]) -> Vec<f32> {
+        let (w, h) = (self.w, self.h);
+        assert_eq!(test.len(), 3 * w * h, "ꟻLIP: the test image is not the reference's size");
+        let mut map = vec![0f32; w * h];
+        for (exposure, reference) in &self.exposures {
+            Bands::new(test, w, h, *exposure, &self.kernels).compare_into(reference, &mut map);
+        }
+        map
+    }
+}
+
+/// The LDR-ꟻLIP error map of two linear RGB images (values clamped to [0, 1]).
+pub fn flip_ldr_map(reference: &[f32], test: &[f32], w: usize, h: usize, ppd: f32) -> Vec<f32> {
+    FlipReference::ldr(reference, w, h, ppd).map(test)
 }
 
 /// `(start, stop, count)` exposures of HDR-ꟻLIP for a reference.
@@ -314,20 +640,7 @@ pub fn exposures(reference: &[f32]) -> (f32, f32, usize) {
 
 /// The HDR-ꟻLIP error map of two linear RGB images.
 pub fn flip_hdr_map(reference: &[f32], test: &[f32], w: usize, h: usize, ppd: f32) -> Vec<f32> {
-    let (start, stop, count) = exposures(reference);
-    let step = (stop - start) / (count - 1) as f32;
-    let mut out = vec![0f32; w * h];
-    for i in 0..count {
-        let m = 2f32.powf(start + i as f32 * step);
-        let expose = |img: &[f32]| img.iter().map(|v| clamp01(tone_map_aces(v * m))).collect::<Vec<f32>>();
-        let e = flip_ldr_map(&expose(reference), &expose(test), w, h, ppd);
-        for (o, v) in out.iter_mut().zip(e) {
-            if v > *o {
-                *o = v;
-            }
-        }
-    }
-    out
+    FlipReference::hdr(reference, w, h, ppd).map(test)
 }
 
 #[cfg(test)]
@@ -345,6 +658,32 @@ mod tests {
         assert_eq!((k.y.len(), k.g.len()), (21, 19));
         assert!((k.y.iter().sum::<f32>() - 1.0).abs() < 1e-5);
         assert!((k.dg.iter().filter(|v| **v > 0.0).sum::<f32>() - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn cube_root_is_within_two_ulps_of_powf() {
+        let mut t = 0.008f32;
+        while t < 2.0 {
+            let (ours, theirs) = (cbrt(t), t.powf(1.0 / 3.0));
+            assert!((ours - theirs).abs() <= 2.0 * f32::EPSILON * theirs, "cbrt({t}) = {ours}, powf gives {theirs}");
+            t = t * 1.0001 + 1e-7;
+        }
+    }
+
+    #[test]
+    fn pow_is_within_a_few_ulps_of_powf() {
+        let mut x = 1e-42f32;
+        while x < 300.0 {
+            for y in [0.0f32, 0.05, 0.3, 0.5, 0.7, 0.999, 1.0, 1.3, -0.2] {
+                let (ours, theirs) = (pow(x, y), x.powf(y));
+                // The rounding of y · log₂ x grows with its size: an ulp of the result per unit.
+                let allowed = 4.0 + (y * x.log2()).abs();
+                let ulps = (ours - theirs).abs() / (theirs * f32::EPSILON).max(f32::from_bits(1));
+                assert!(ulps <= allowed, "pow({x}, {y}) = {ours}, powf gives {theirs}");
+            }
+            x *= 1.37;
+        }
+        assert_eq!((pow(0.0, 0.7), pow(0.0, 0.0), pow(0.0, -1.0)), (0.0, 1.0, f32::INFINITY));
     }
 
     #[test]

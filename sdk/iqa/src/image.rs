@@ -21,9 +21,12 @@ impl Image {
         Image { width, height, rgb }
     }
 
-    /// Reads an OpenEXR file in full 32-bit float.
+    /// Reads an OpenEXR file in full 32-bit float, or an 8-bit PNG (by its
+    /// `.png` extension) as sRGB decoded to linear, as ꟻLIP's own tool does
+    /// for LDR images.
     pub fn read(path: &Path) -> io::Result<Image> {
-        let (width, height, rgb) = read_exr(path)?;
+        let png = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
+        let (width, height, rgb) = if png { read_png(path)? } else { read_exr(path)? };
         Ok(Image { width, height, rgb })
     }
 
@@ -93,6 +96,23 @@ pub fn read_exr(path: &Path) -> io::Result<(u32, u32, Vec<f32>)> {
     Ok((size.0 as u32, size.1 as u32, image.layer_data.channel_data.pixels.1))
 }
 
+/// Reads a PNG as 8-bit sRGB, decoded to linear RGB (alpha dropped).
+pub fn read_png(path: &Path) -> io::Result<(u32, u32, Vec<f32>)> {
+    let image = ::image::open(path)
+        .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, format!("{}: {e}", path.display())))?
+        .into_rgb8();
+    let linear: [f32; 256] = std::array::from_fn(|b| {
+        let c = b as f32 / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    });
+    let (width, height) = image.dimensions();
+    Ok((width, height, image.into_raw().into_iter().map(|b| linear[b as usize]).collect()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -106,5 +126,17 @@ mod tests {
         let (w, h, back) = read_exr(&path).unwrap();
         assert_eq!((w, h), (5, 3));
         assert_eq!(back, rgb);
+    }
+
+    #[test]
+    fn png_reads_as_linear_srgb() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        ::image::RgbImage::from_raw(2, 1, vec![0, 128, 255, 10, 20, 30]).unwrap().save(&path).unwrap();
+        let image = Image::read(&path).unwrap();
+        assert_eq!((image.width, image.height), (2, 1));
+        assert_eq!(image.rgb[0], 0.0);
+        assert!((image.rgb[1] - 0.215_861).abs() < 1e-5, "{}", image.rgb[1]);
+        assert_eq!(image.rgb[2], 1.0);
     }
 }

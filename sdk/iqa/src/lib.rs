@@ -241,8 +241,78 @@ fn finite_or_zero(img: &Image, nonfinite: u64) -> std::borrow::Cow<'_, [f32]> {
     }
 }
 
+/// A reference image and what the metrics derive from it alone (ꟻLIP's
+/// filtered reference at each exposure), made at most once and reused for
+/// every test image scored against it: a runner scoring many runs of a
+/// scene holds one per scene.
+pub struct Reference<'a> {
+    image: std::borrow::Cow<'a, Image>,
+    nonfinite: std::sync::OnceLock<u64>,
+    flip_ldr: std::sync::OnceLock<flip::FlipReference>,
+    flip_hdr: std::sync::OnceLock<flip::FlipReference>,
+}
+
+impl<'a> Reference<'a> {
+    /// A reference that owns its image.
+    pub fn new(image: Image) -> Reference<'static> {
+        Reference::from_cow(std::borrow::Cow::Owned(image))
+    }
+
+    /// A reference that borrows its image.
+    pub fn borrowed(image: &'a Image) -> Reference<'a> {
+        Reference::from_cow(std::borrow::Cow::Borrowed(image))
+    }
+
+    fn from_cow(image: std::borrow::Cow<'a, Image>) -> Reference<'a> {
+        Reference { image, nonfinite: Default::default(), flip_ldr: Default::default(), flip_hdr: Default::default() }
+    }
+
+    /// The image.
+    pub fn image(&self) -> &Image {
+        &self.image
+    }
+
+    /// Makes now what `metric` derives from the reference alone (otherwise
+    /// made by its first evaluation).
+    pub fn prepare(&self, metric: Metric) {
+        if matches!(metric, Metric::Flip | Metric::HdrFlip) {
+            self.flip(metric);
+        }
+    }
+
+    fn nonfinite(&self) -> u64 {
+        *self.nonfinite.get_or_init(|| pixelwise::nonfinite_pixels(&self.image))
+    }
+
+    /// ꟻLIP's prepared reference: non-finite values read as 0.
+    fn flip(&self, metric: Metric) -> &flip::FlipReference {
+        let make = || {
+            let r = finite_or_zero(&self.image, self.nonfinite());
+            let (w, h) = (self.image.width as usize, self.image.height as usize);
+            if metric == Metric::Flip {
+                flip::FlipReference::ldr(&r, w, h, flip::default_ppd())
+            } else {
+                flip::FlipReference::hdr(&r, w, h, flip::default_ppd())
+            }
+        };
+        if metric == Metric::Flip {
+            self.flip_ldr.get_or_init(make)
+        } else {
+            self.flip_hdr.get_or_init(make)
+        }
+    }
+}
+
 /// Computes a built-in metric.
 pub fn evaluate(metric: Metric, reference: &Image, test: &Image) -> Result<Evaluation, IqaError> {
+    evaluate_against(metric, &Reference::borrowed(reference), test)
+}
+
+/// Computes a built-in metric against a [`Reference`], reusing what it
+/// already derived.
+pub fn evaluate_against(metric: Metric, reference: &Reference<'_>, test: &Image) -> Result<Evaluation, IqaError> {
+    let prepared = reference;
+    let reference = prepared.image();
     if (reference.width, reference.height) != (test.width, test.height) {
         return Err(IqaError::SizeMismatch(reference.width, reference.height, test.width, test.height));
     }
@@ -250,19 +320,15 @@ pub fn evaluate(metric: Metric, reference: &Image, test: &Image) -> Result<Evalu
         return Err(IqaError::Empty);
     }
     if matches!(metric, Metric::Flip | Metric::HdrFlip) {
-        let (nonfinite_reference, nonfinite_test) = pixelwise::count_nonfinite(reference, test);
+        let nonfinite_reference = prepared.nonfinite();
+        let nonfinite_test = pixelwise::nonfinite_pixels(test);
         // ꟻLIP filters the whole image: non-finite values read as 0 (and are
         // counted); copied only when there are any.
-        let (r, t) = (finite_or_zero(reference, nonfinite_reference), finite_or_zero(test, nonfinite_test));
-        let (w, h) = (reference.width as usize, reference.height as usize);
-        let ppd = flip::default_ppd();
-        let values = if metric == Metric::Flip {
-            flip::flip_ldr_map(&r, &t, w, h, ppd)
-        } else {
-            flip::flip_hdr_map(&r, &t, w, h, ppd)
-        };
+        let t = finite_or_zero(test, nonfinite_test);
+        let w = reference.width as usize;
+        let values = prepared.flip(metric).map(&t);
         let rows: Vec<f64> = values.par_chunks(w).map(|row| row.iter().map(|v| *v as f64).sum()).collect();
-        let value = rows.iter().sum::<f64>() / (w * h) as f64;
+        let value = rows.iter().sum::<f64>() / values.len() as f64;
         let map = ErrorMap { width: reference.width, height: reference.height, values, scale: metric.map_scale() };
         return Ok(Evaluation { value, map: Some(map), nonfinite_reference, nonfinite_test });
     }

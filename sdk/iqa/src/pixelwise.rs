@@ -226,24 +226,26 @@ fn power_table() -> &'static [f64] {
 
 /// Pixels with a non-finite channel in the reference and in the test image.
 pub(crate) fn count_nonfinite(reference: &Image, test: &Image) -> (u64, u64) {
+    (nonfinite_pixels(reference), nonfinite_pixels(test))
+}
+
+/// Pixels with a non-finite channel.
+pub(crate) fn nonfinite_pixels(img: &Image) -> u64 {
     // Non-finite floats have every exponent bit set: a branch-free test per
     // channel, OR-ed per pixel, that vectorises.
     const EXPONENT: u32 = 0x7F80_0000;
-    let count = |img: &Image| -> u64 {
-        img.rgb
-            .par_chunks(3 * 4096)
-            .map(|chunk| {
-                chunk
-                    .chunks_exact(3)
-                    .map(|p| {
-                        let bad = |v: f32| (v.to_bits() & EXPONENT == EXPONENT) as u64;
-                        bad(p[0]) | bad(p[1]) | bad(p[2])
-                    })
-                    .sum::<u64>()
-            })
-            .sum()
-    };
-    (count(reference), count(test))
+    img.rgb
+        .par_chunks(3 * 4096)
+        .map(|chunk| {
+            chunk
+                .chunks_exact(3)
+                .map(|p| {
+                    let bad = |v: f32| (v.to_bits() & EXPONENT == EXPONENT) as u64;
+                    bad(p[0]) | bad(p[1]) | bad(p[2])
+                })
+                .sum::<u64>()
+        })
+        .sum()
 }
 
 /// Squared error of tone-mapped values.

@@ -168,3 +168,45 @@ fn error_maps_use_one_fixed_scale() {
         }
     }
 }
+
+#[test]
+fn a_reference_prepared_once_scores_every_test_as_a_fresh_one() {
+    use fbksd_iqa::{evaluate_against, Reference};
+    let r = img(67, 45, |x, y, c| ((x * 7 + y * 3 + c as u32) % 11) as f32 * 0.4);
+    let mut nan_test = img(67, 45, |x, y, c| ((x * 5 + y + c as u32) % 13) as f32 * 0.3);
+    nan_test.rgb[100] = f32::NAN;
+    let tests = [img(67, 45, |x, y, _| ((x + y) % 5) as f32 * 0.5), nan_test];
+    let reference = Reference::new(r.clone());
+    for metric in Metric::ALL {
+        reference.prepare(metric);
+        for t in &tests {
+            // Bit for bit (NaN marks a pixel without a value in a map).
+            let bits = |e: fbksd_iqa::Evaluation| {
+                let map = e.map.map(|m| m.values.iter().map(|v| v.to_bits()).collect::<Vec<u32>>());
+                (e.value.to_bits(), map, e.nonfinite_reference, e.nonfinite_test)
+            };
+            let (prepared, fresh) = (evaluate_against(metric, &reference, t).unwrap(), evaluate(metric, &r, t).unwrap());
+            assert_eq!(bits(prepared), bits(fresh), "{metric:?}");
+        }
+    }
+}
+
+#[test]
+fn flip_maps_do_not_depend_on_the_number_of_threads() {
+    // The filters run in bands of rows whose size follows the thread count;
+    // bands overlap, and every pixel must come out the same.
+    let r = img(131, 200, |x, y, c| (((x * 13) ^ (y * 7)) % 17 + c as u32) as f32 * 0.2);
+    let t = img(131, 200, |x, y, c| (((x * 11) ^ (y * 5)) % 19 + c as u32) as f32 * 0.2);
+    for metric in [Metric::Flip, Metric::HdrFlip] {
+        let maps: Vec<Vec<f32>> = [1, 2, 3]
+            .into_iter()
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| evaluate(metric, &r, &t)).unwrap().map.unwrap().values
+            })
+            .collect();
+        assert!(maps[0].iter().any(|v| *v > 0.0));
+        assert_eq!(maps[0], maps[1], "{metric:?}: 1 and 2 threads");
+        assert_eq!(maps[0], maps[2], "{metric:?}: 1 and 3 threads");
+    }
+}
