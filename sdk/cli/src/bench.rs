@@ -1,10 +1,16 @@
-//! `fbksd bench transport`: sample-transport throughput and memory.
+//! `fbksd bench`: sample-transport throughput and memory, and the speed of
+//! scoring a results directory.
 //!
-//! Streams a `width × height × spp` request of 14-float samples from the
+//! `transport` streams a `width × height × spp` request of 14-float samples from the
 //! analytic renderer (constant pattern: it only writes memory) to the Rust
 //! box filter (which reads every sample's colour), through a real manager,
 //! and prints the throughput beside this machine's single-thread memcpy
 //! bandwidth, and the peak RSS of manager, renderer and technique.
+//!
+//! `metrics` scores runs on synthetic scenes with every built-in metric as
+//! a runner does ([`fbksd_manager::evaluation::compute`]: in parallel, each
+//! reference prepared once) and, on a copy of the same directory, one pair
+//! and one metric at a time (the way it was done before), and prints both.
 
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
@@ -17,6 +23,21 @@ use std::time::Instant;
 pub enum BenchCommand {
     /// Sample-transport throughput against memcpy, and peak memory.
     Transport(TransportArgs),
+    /// Scoring runs with the seven built-in metrics, as a runner does and one pair at a time.
+    Metrics(MetricsArgs),
+}
+
+#[derive(Args)]
+pub struct MetricsArgs {
+    /// Runs to score (spread over five scenes).
+    #[arg(long, default_value_t = 50)]
+    runs: usize,
+    /// Image side.
+    #[arg(long, default_value_t = 512)]
+    size: u32,
+    /// Build the scenes and results here and keep them (default: a temporary directory).
+    #[arg(long)]
+    dir: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -43,6 +64,7 @@ const SAMPLE_FLOATS: u64 = 14;
 pub fn bench(command: BenchCommand) -> anyhow::Result<()> {
     match command {
         BenchCommand::Transport(args) => transport(args),
+        BenchCommand::Metrics(args) => metrics(args),
     }
 }
 
@@ -141,5 +163,149 @@ fn transport(args: TransportArgs) -> anyhow::Result<()> {
         None => println!("  renderer:  unknown (did not exit in time)"),
     }
     println!("  technique: {:7.1} MB", outcome.peak_memory_bytes as f64 / 1e6);
+    Ok(())
+}
+
+/// Writes five scenes (metadata and an HDR reference) and a results
+/// directory of `runs` runs on them (noisy copies of the references).
+fn metrics_fixture(root: &Path, runs: usize, size: u32) -> anyhow::Result<()> {
+    use fbksd_exchange::results::{IndexEntry, Repeat, ResultsDir, RunFiles};
+    use fbksd_iqa::image::write_exr;
+    let n = size as usize;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut noise = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+    };
+    let scenes = 5;
+    let references: Vec<Vec<f32>> = (0..scenes)
+        .map(|s| {
+            (0..n * n * 3)
+                .map(|i| {
+                    let (x, y, c) = ((i / 3) % n, i / 3 / n, i % 3);
+                    let v = ((x as f32 * 0.02 + s as f32).sin() * (y as f32 * 0.03 + c as f32).cos()).abs();
+                    // An HDR range: a few bright spots over a dim background.
+                    if (x / 37 + y / 29 + s) % 11 == 0 {
+                        8.0 * v
+                    } else {
+                        0.4 * v
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    for (s, reference) in references.iter().enumerate() {
+        let dir = root.join("scenes").join(format!("scene-{s}"));
+        std::fs::create_dir_all(&dir)?;
+        write_exr(&dir.join("reference.exr"), size, size, reference)?;
+        let meta = serde_json::json!({
+            "name": format!("scene-{s}"), "path": "scene.txt", "ref-img": "reference.exr",
+            "renderer": "procedural", "category": "experimental", "tags": [], "spp": [4, 16],
+            "width": size, "height": size, "reference": {"method": "render", "spp": 4096}, "description": "bench"
+        });
+        std::fs::write(dir.join(fbksd_exchange::scenes::META_FILE), serde_json::to_vec_pretty(&meta)?)?;
+        std::fs::write(dir.join("scene.txt"), "bench")?;
+    }
+    let results = ResultsDir::create(&root.join("results"))?;
+    let mut index = results.read_index()?;
+    for run in 0..runs {
+        // Five techniques on five scenes per budget: 4, 8, 16, … spp.
+        let (scene, technique, spp) = (run % scenes, run / scenes % 5, 4u64 << (run / 25));
+        let mut entry = IndexEntry::new(&format!("technique-{technique}"), &format!("scene-{scene}"), spp);
+        let dir = results.run_dir(&entry.technique, &entry.scene)?;
+        let files = RunFiles { spp: entry.spp, repeat: 0 };
+        let amount = 1.0 / (spp as f32).sqrt();
+        let test: Vec<f32> = references[scene].iter().map(|v| (v * (1.0 + amount * noise())).max(0.0)).collect();
+        write_exr(&dir.join(files.image()), size, size, &test)?;
+        let image = dir.join(files.image()).strip_prefix(results.root())?.to_string_lossy().into_owned();
+        entry.repeats.push(Repeat {
+            seed: 0,
+            status: RunStatus::Ok,
+            message: String::new(),
+            log: String::new(),
+            image: Some(image),
+            technique_ms: 1.0,
+            render_ms: 1.0,
+            wall_ms: 1.0,
+            cpu_ms: 1.0,
+            waiting_ms: 0.0,
+            peak_memory_bytes: 0,
+            used_samples: 0,
+            metrics: Default::default(),
+        });
+        entry.summarize();
+        index.runs.push(entry);
+    }
+    results.write_index(index)?;
+    Ok(())
+}
+
+fn metrics(args: MetricsArgs) -> anyhow::Result<()> {
+    use fbksd_exchange::results::{ResultsDir, RunFiles};
+    use fbksd_iqa::image::Image;
+    use fbksd_iqa::{evaluate, Metric, ValueRecord};
+    use fbksd_manager::evaluation::{compute, find_scenes, AnyMetric};
+    let work = tempfile::tempdir()?;
+    let root = args.dir.clone().unwrap_or_else(|| work.path().to_path_buf());
+    let (runner_root, one_root) = (root.join("runner"), root.join("one-at-a-time"));
+    for root in [&runner_root, &one_root] {
+        metrics_fixture(root, args.runs, args.size)?;
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    println!(
+        "{} runs ({}×{}, five scenes), 7 metrics each, error maps for every run, {cores} cores:",
+        args.runs, args.size, args.size
+    );
+
+    let metrics: Vec<AnyMetric> = Metric::ALL.iter().map(|m| AnyMetric::Builtin(*m)).collect();
+    let scenes = find_scenes(&[runner_root.join("scenes")])?;
+    let start = Instant::now();
+    let summary = compute(&ResultsDir::create(&runner_root.join("results"))?, &scenes, &metrics, |_, _| {})?;
+    let ours = start.elapsed().as_secs_f64();
+    if summary.computed != args.runs * metrics.len() || !summary.skipped.is_empty() {
+        bail!("compute scored {} values and skipped {:?}", summary.computed, summary.skipped);
+    }
+
+    // One pair and one metric at a time: each run's image read once (and its
+    // viewer pixel file written), the scene's reference image kept, every
+    // metric from scratch.
+    let scenes = find_scenes(&[one_root.join("scenes")])?;
+    let results = ResultsDir::create(&one_root.join("results"))?;
+    let start = Instant::now();
+    let mut references = std::collections::BTreeMap::new();
+    for entry in results.read_index()?.runs {
+        let reference = match references.entry(entry.scene.clone()) {
+            std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::btree_map::Entry::Vacant(e) => {
+                e.insert(Image::read(&scenes[&entry.scene].reference_file())?)
+            }
+        };
+        let test_path = results.root().join(entry.repeats[0].image.as_deref().context("an image")?);
+        let test = Image::read(&test_path)?;
+        let files = RunFiles { spp: entry.spp, repeat: 0 };
+        std::fs::write(test_path.with_file_name(files.pixels()), test.pixels_file())?;
+        for metric in Metric::ALL {
+            let e = evaluate(metric, reference, &test)?;
+            if let Some(map) = &e.map {
+                map.write_png(&test_path.with_file_name(files.error_map(metric.acronym())))?;
+            }
+            let record = ValueRecord {
+                metric: metric.acronym().into(),
+                value: e.value,
+                nonfinite_reference: e.nonfinite_reference,
+                nonfinite_test: e.nonfinite_test,
+            };
+            std::fs::write(
+                test_path.with_file_name(files.metric_value(metric.acronym())),
+                serde_json::to_vec(&record)?,
+            )?;
+        }
+    }
+    let theirs = start.elapsed().as_secs_f64();
+    println!("  as a runner scores them (fbksd_manager::evaluation::compute): {ours:6.2} s  (target ≤ 4 s)");
+    println!("  one pair and one metric at a time:                           {theirs:6.2} s");
+    println!("  {:.1}× faster", theirs / ours);
     Ok(())
 }

@@ -59,12 +59,20 @@ pub fn encode(width: u32, height: u32, channels: u32, interleaved: &[f32]) -> Ve
     for v in [VERSION, width, height, channels] {
         raw.extend_from_slice(&v.to_le_bytes());
     }
-    for byte in 0..4 {
-        for channel in 0..c {
-            raw.extend((0..pixels).map(|p| interleaved[p * c + channel].to_bits().to_le_bytes()[byte]));
+    // Byte planes in one pass over the values: plane (byte, channel) at
+    // `(byte · c + channel) · pixels`.
+    raw.resize(HEADER_BYTES + 4 * n, 0);
+    let planes = &mut raw[HEADER_BYTES..];
+    for (i, v) in interleaved.iter().enumerate() {
+        let (p, channel) = (i / c, i % c);
+        for (byte, b) in v.to_bits().to_le_bytes().into_iter().enumerate() {
+            planes[(byte * c + channel) * pixels + p] = b;
         }
     }
-    let mut gz = flate2::write::GzEncoder::new(Vec::with_capacity(n), flate2::Compression::new(6));
+    // The fastest level: the low mantissa bytes of rendered images are
+    // noise that no level compresses, and level 6 took four times as long
+    // for files 2 % smaller (`fbksd bench metrics`).
+    let mut gz = flate2::write::GzEncoder::new(Vec::with_capacity(n), flate2::Compression::fast());
     gz.write_all(&raw).expect("writing to memory");
     gz.finish().expect("writing to memory")
 }

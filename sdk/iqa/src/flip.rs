@@ -36,6 +36,7 @@
 // The published constants are kept as written, even where f32 holds fewer digits.
 #![allow(clippy::excessive_precision)]
 
+use crate::fastmath::{cbrt, pow};
 use rayon::prelude::*;
 
 const PI: f32 = std::f32::consts::PI;
@@ -75,62 +76,6 @@ fn ycxcz_to_xyz(v: [f32; 3]) -> [f32; 3] {
     let yp = (v[0] + 16.0) / 116.0;
     let (cx, cz) = (v[1] / 500.0, v[2] / 200.0);
     [(yp + cx) * WHITE[0], yp * WHITE[1], (yp - cz) * WHITE[2]]
-}
-
-/// The cube root of `t` ≥ 0.008 (CIELab's cube branch), within an ulp or two
-/// of `powf(t, 1/3)`: a guess from the exponent bits, refined by three Newton
-/// steps. Unlike a call to the library's `powf`, it vectorises.
-#[inline(always)]
-fn cbrt(t: f32) -> f32 {
-    // Dividing the bit pattern by 3 (in f32, exact enough for a guess) divides the exponent by 3.
-    let mut y = f32::from_bits(((t.to_bits() as i32 as f32 * (1.0 / 3.0)) as i32 + 0x2A51_4067) as u32);
-    for _ in 0..3 {
-        y = (2.0 * y + t / (y * y)) * (1.0 / 3.0);
-    }
-    y
-}
-
-/// `x^y` for `x` ≥ 0 and finite `y`, within a few ulps of `powf` (`0^0` is
-/// 1), as `2^(y · log₂ x)` from polynomials that vectorise, where the
-/// library's `powf` is a call per value.
-#[inline(always)]
-fn pow(x: f32, y: f32) -> f32 {
-    // log₂ x: exponent and mantissa m in [√½, √2); ln m = 2 atanh(s), s = (m − 1)/(m + 1), |s| ≤ 0.172.
-    let tiny = x < f32::MIN_POSITIVE;
-    let scaled = if tiny { x * 8_388_608.0 } else { x };
-    let bits = scaled.to_bits();
-    let mantissa = f32::from_bits((bits & 0x007F_FFFF) | 0x3F80_0000);
-    let high = mantissa > std::f32::consts::SQRT_2;
-    let m = if high { mantissa * 0.5 } else { mantissa };
-    let exponent = ((bits >> 23) & 0xFF) as i32 - 127 + high as i32 - if tiny { 23 } else { 0 };
-    let sv = (m - 1.0) / (m + 1.0);
-    let s2 = sv * sv;
-    let ln_m = sv * (2.0 + s2 * (2.0 / 3.0 + s2 * (2.0 / 5.0 + s2 * (2.0 / 7.0 + s2 * (2.0 / 9.0)))));
-    let log2 = exponent as f32 + ln_m * std::f32::consts::LOG2_E;
-    // 2^z: z = n + f, |f| ≤ ½, 2^f by its series to the 7th power; 2^n in two halves so that
-    // results down to the subnormals come out right.
-    let z = (y * log2).clamp(-200.0, 127.9);
-    let n = z.round();
-    let t = (z - n) * std::f32::consts::LN_2;
-    let p = 1.0
-        + t * (1.0
-            + t * (1.0 / 2.0
-                + t * (1.0 / 6.0 + t * (1.0 / 24.0 + t * (1.0 / 120.0 + t * (1.0 / 720.0 + t * (1.0 / 5040.0)))))));
-    let n = n as i32;
-    let (n1, n2) = (n >> 1, n - (n >> 1));
-    let two_to = |k: i32| f32::from_bits(((k + 127) as u32) << 23);
-    let v = p * two_to(n1) * two_to(n2);
-    if x == 0.0 {
-        if y > 0.0 {
-            0.0
-        } else if y == 0.0 {
-            1.0
-        } else {
-            f32::INFINITY
-        }
-    } else {
-        v
-    }
 }
 
 /// CIELab's f(t): both branches computed and one chosen, so the pixel loop vectorises.
@@ -368,15 +313,16 @@ fn row_pass(rgb_row: &[f32], exposure: Exposure, k: &Kernels, padded: &mut [Vec<
     correlate(next(), &k.g, |j| shifted(pyn, pad, rf, j));
 }
 
-/// The column pass of output row `y`, from the row-filtered planes of input
-/// rows `first..`: the eight column filters, then the per-pixel colour
+/// The column pass of output row `y`, from the ring of row-filtered planes
+/// of the input rows around it ([`band_pass`]): the eight column filters, then the per-pixel colour
 /// conversion and feature magnitudes.
 #[inline(always)]
-fn column_pass(b: &Bands<'_>, rows: &[f32], first: usize, y: usize, acc: &mut [f32], out: &mut [f32]) {
+fn column_pass(b: &Bands<'_>, rows: &[f32], y: usize, acc: &mut [f32], out: &mut [f32]) {
     let (w, h, k) = (b.w, b.h, b.kernels);
     let (rc, rf) = k.radii();
+    let ring = ring_rows(k);
     let plane = |yi: usize, p: usize| {
-        let start = ((yi - first) * ROW_PLANES + p) * w;
+        let start = ((yi % ring) * ROW_PLANES + p) * w;
         &rows[start..start + w]
     };
     let source_row = |j: usize, r: usize| (y as isize + j as isize - r as isize).clamp(0, h as isize - 1) as usize;
@@ -411,23 +357,32 @@ fn column_pass(b: &Bands<'_>, rows: &[f32], first: usize, y: usize, acc: &mut [f
 }
 
 /// Prepares the output rows `y0..` of one band (`out` holds
-/// `PREPARED_PLANES · w` values per row): the row pass of every input row
-/// the band's column filters reach, then the column pass of each output
-/// row. Bands overlap by the filter radius on each side; that recomputation
-/// buys a working set that stays in cache.
+/// `PREPARED_PLANES · w` values per row): each output row's column pass
+/// reads the row-filtered planes of the `2·reach + 1` input rows around
+/// it, kept in a ring that the row pass fills just ahead, so the working
+/// set stays in the core's cache. Bands recompute the `reach` input rows
+/// they share with their neighbours.
 #[inline(always)]
 fn band_pass(b: &Bands<'_>, y0: usize, s: &mut BandScratch, out: &mut [f32]) {
     let (rgb, w, h, e, k) = (b.rgb, b.w, b.h, b.exposure, b.kernels);
-    let reach = k.radii().0.max(k.radii().1);
-    let count = out.len() / (PREPARED_PLANES * w);
-    let (first, last) = (y0.saturating_sub(reach), (y0 + count + reach).min(h));
-    s.rows.resize((last - first) * ROW_PLANES * w, 0.0);
-    for (yi, planes) in (first..last).zip(s.rows.chunks_exact_mut(ROW_PLANES * w)) {
-        row_pass(&rgb[yi * 3 * w..(yi + 1) * 3 * w], e, k, &mut s.padded, planes);
-    }
+    let ring = ring_rows(k);
+    s.rows.resize(ring * ROW_PLANES * w, 0.0);
+    let mut next = y0.saturating_sub(ring / 2);
     for (i, row) in out.chunks_exact_mut(PREPARED_PLANES * w).enumerate() {
-        column_pass(b, &s.rows, first, y0 + i, &mut s.acc, row);
+        let y = y0 + i;
+        while next <= (y + ring / 2).min(h - 1) {
+            let slot = next % ring;
+            let planes = &mut s.rows[slot * ROW_PLANES * w..(slot + 1) * ROW_PLANES * w];
+            row_pass(&rgb[next * 3 * w..(next + 1) * 3 * w], e, k, &mut s.padded, planes);
+            next += 1;
+        }
+        column_pass(b, &s.rows, y, &mut s.acc, row);
     }
+}
+
+/// Input rows a column pass reads: the longest kernel's.
+fn ring_rows(k: &Kernels) -> usize {
+    2 * k.radii().0.max(k.radii().1) + 1
 }
 
 /// Whether the passes may run their AVX2 and FMA builds (the values are the
@@ -473,7 +428,7 @@ struct Bands<'a> {
 
 impl<'a> Bands<'a> {
     fn new(rgb: &'a [f32], w: usize, h: usize, exposure: Exposure, kernels: &'a Kernels) -> Bands<'a> {
-        let rows = h.div_ceil(4 * rayon::current_num_threads()).max(32).min(h.max(1));
+        let rows = h.div_ceil(4 * rayon::current_num_threads()).max(128).min(h.max(1));
         Bands { rgb, w, h, exposure, kernels, fast: has_avx2(), rows }
     }
 
@@ -658,32 +613,6 @@ mod tests {
         assert_eq!((k.y.len(), k.g.len()), (21, 19));
         assert!((k.y.iter().sum::<f32>() - 1.0).abs() < 1e-5);
         assert!((k.dg.iter().filter(|v| **v > 0.0).sum::<f32>() - 1.0).abs() < 1e-5);
-    }
-
-    #[test]
-    fn cube_root_is_within_two_ulps_of_powf() {
-        let mut t = 0.008f32;
-        while t < 2.0 {
-            let (ours, theirs) = (cbrt(t), t.powf(1.0 / 3.0));
-            assert!((ours - theirs).abs() <= 2.0 * f32::EPSILON * theirs, "cbrt({t}) = {ours}, powf gives {theirs}");
-            t = t * 1.0001 + 1e-7;
-        }
-    }
-
-    #[test]
-    fn pow_is_within_a_few_ulps_of_powf() {
-        let mut x = 1e-42f32;
-        while x < 300.0 {
-            for y in [0.0f32, 0.05, 0.3, 0.5, 0.7, 0.999, 1.0, 1.3, -0.2] {
-                let (ours, theirs) = (pow(x, y), x.powf(y));
-                // The rounding of y · log₂ x grows with its size: an ulp of the result per unit.
-                let allowed = 4.0 + (y * x.log2()).abs();
-                let ulps = (ours - theirs).abs() / (theirs * f32::EPSILON).max(f32::from_bits(1));
-                assert!(ulps <= allowed, "pow({x}, {y}) = {ours}, powf gives {theirs}");
-            }
-            x *= 1.37;
-        }
-        assert_eq!((pow(0.0, 0.7), pow(0.0, 0.0), pow(0.0, -1.0)), (0.0, 1.0, f32::INFINITY));
     }
 
     #[test]

@@ -35,6 +35,7 @@
 
 pub mod colormap;
 pub mod external;
+mod fastmath;
 pub mod flip;
 pub mod image;
 mod pixelwise;
@@ -141,7 +142,7 @@ pub enum MapScale {
 }
 
 impl MapScale {
-    /// Position of `v` on the colour map, in [0, 1] (NaN stays NaN).
+    /// Position of `v` on the colour map, in [0, 1] (NaN stays NaN; +∞ is 1).
     pub fn position(self, v: f32) -> f32 {
         if v.is_nan() {
             return f32::NAN;
@@ -152,7 +153,9 @@ impl MapScale {
                 if v <= 0.0 {
                     0.0
                 } else {
-                    ((v.log10() - min) / (max - min)).clamp(0.0, 1.0)
+                    // log₁₀ from the vectorising log₂ (within 1e−7): maps colour millions of values.
+                    let log10 = fastmath::log2(v) * std::f32::consts::LOG10_2;
+                    ((log10 - min) / (max - min)).clamp(0.0, 1.0)
                 }
             }
         }
@@ -175,11 +178,17 @@ pub struct ErrorMap {
 impl ErrorMap {
     /// Writes the map as a PNG in the error colour map.
     pub fn write_png(&self, path: &Path) -> std::io::Result<()> {
-        let bytes: Vec<u8> = self.values.iter().flat_map(|v| colormap::color(self.scale.position(*v))).collect();
-        ::image::RgbImage::from_raw(self.width, self.height, bytes)
-            .ok_or_else(|| std::io::Error::other("error map size"))?
-            .save(path)
-            .map_err(|e| std::io::Error::other(format!("{}: {e}", path.display())))
+        use ::image::codecs::png::{CompressionType, FilterType, PngEncoder};
+        use ::image::ImageEncoder;
+        let bytes: Vec<u8> =
+            self.values.par_iter().flat_map_iter(|v| colormap::color(self.scale.position(*v))).collect();
+        let fail = |e: &dyn std::fmt::Display| std::io::Error::other(format!("{}: {e}", path.display()));
+        let file = std::io::BufWriter::new(std::fs::File::create(path).map_err(|e| fail(&e))?);
+        // Fast compression: a runner writes six maps per run, and the default
+        // level spends most of their time for a few per cent of size.
+        PngEncoder::new_with_quality(file, CompressionType::Fast, FilterType::Adaptive)
+            .write_image(&bytes, self.width, self.height, ::image::ExtendedColorType::Rgb8)
+            .map_err(|e| fail(&e))
     }
 }
 

@@ -185,7 +185,8 @@ fn a_reference_prepared_once_scores_every_test_as_a_fresh_one() {
                 let map = e.map.map(|m| m.values.iter().map(|v| v.to_bits()).collect::<Vec<u32>>());
                 (e.value.to_bits(), map, e.nonfinite_reference, e.nonfinite_test)
             };
-            let (prepared, fresh) = (evaluate_against(metric, &reference, t).unwrap(), evaluate(metric, &r, t).unwrap());
+            let (prepared, fresh) =
+                (evaluate_against(metric, &reference, t).unwrap(), evaluate(metric, &r, t).unwrap());
             assert_eq!(bits(prepared), bits(fresh), "{metric:?}");
         }
     }

@@ -14,7 +14,8 @@ use fbksd_exchange::results::{path_safe_name, ResultsDir, RunFiles};
 use fbksd_exchange::scenes::{SceneMeta, META_FILE};
 use fbksd_iqa::external::ExternalMetric;
 use fbksd_iqa::image::Image;
-use fbksd_iqa::{evaluate, Metric, MetricInfo, ValueRecord};
+use fbksd_iqa::{evaluate_against, Metric, MetricInfo, Reference, ValueRecord};
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -82,112 +83,122 @@ pub fn find_scenes(roots: &[PathBuf]) -> io::Result<BTreeMap<String, SceneMeta>>
     Ok(out)
 }
 
+/// One repeat to score: where it is in the index and what to compute.
+struct Task {
+    run: usize,
+    repeat: usize,
+    what: String,
+    scene: String,
+    test_path: PathBuf,
+    reference_path: PathBuf,
+    files: RunFiles,
+    /// Whether the viewer's pixel file of the image is still to be written.
+    write_pixels: bool,
+}
+
+/// What scoring one repeat gave, applied to the index afterwards in order.
+#[derive(Default)]
+struct Scored {
+    values: Vec<(String, f64)>,
+    computed: usize,
+    kept: usize,
+    skipped: Vec<String>,
+}
+
 /// Computes every missing metric value of every `ok` run.
+///
+/// Each scene's reference is read and prepared once ([`Reference`]: ꟻLIP's
+/// filtered reference at each exposure) for all the runs on it, then the
+/// repeats are scored in parallel. `progress` is called from the worker
+/// threads as each value starts.
 pub fn compute(
     results: &ResultsDir,
     scenes: &BTreeMap<String, SceneMeta>,
     metrics: &[AnyMetric],
-    mut progress: impl FnMut(&str, &str),
+    progress: impl Fn(&str, &str) + Sync,
 ) -> io::Result<ComputeSummary> {
     let mut index = results.read_index()?;
     let mut summary = ComputeSummary::default();
-    let mut references: BTreeMap<String, Image> = BTreeMap::new();
-    for entry in index.runs.iter_mut() {
-        let spp = entry.spp;
-        let (technique, scene) = (entry.technique.clone(), entry.scene.clone());
-        for (k, repeat) in entry.repeats.iter_mut().enumerate() {
-            let what = format!("{technique} / {scene} / {spp} spp / seed {}", repeat.seed);
+    let mut tasks = Vec::new();
+    for (run, entry) in index.runs.iter().enumerate() {
+        for (k, repeat) in entry.repeats.iter().enumerate() {
+            let what = format!("{} / {} / {} spp / seed {}", entry.technique, entry.scene, entry.spp, repeat.seed);
             let Some(image) = repeat.image.clone().filter(|_| repeat.status == fbksd_exchange::RunStatus::Ok) else {
                 summary.skipped.push(format!("{what}: status {}", repeat.status));
                 continue;
             };
-            let files = RunFiles { spp, repeat: k as u32 };
-            // The viewer shows a run's first repeat; error maps too.
-            let first = k == 0;
+            let files = RunFiles { spp: entry.spp, repeat: k as u32 };
             let test_path = results.root().join(&image);
-            let mut test: Option<Image> = None;
+            // The viewer shows a run's first repeat, even when it cannot be scored.
             let pixels_file = test_path.with_file_name(files.pixels());
-            if first && !pixels_file.is_file() {
-                let image = test.insert(Image::read(&test_path)?);
-                std::fs::write(&pixels_file, image.pixels_file())?;
-            }
-            let Some(meta) = scenes.get(&scene) else {
-                summary.skipped.push(format!("{what}: no scene named {scene:?} in the scene directories"));
-                continue;
-            };
-            let reference_path = meta.reference_file();
-            if !reference_path.is_file() {
-                summary.skipped.push(format!(
+            let write_pixels = k == 0 && !pixels_file.is_file();
+            let unscored = match scenes.get(&entry.scene) {
+                None => Err(format!("{what}: no scene named {:?} in the scene directories", entry.scene)),
+                Some(meta) if !meta.reference_file().is_file() => Err(format!(
                     "{what}: no reference at {} (build it: fbksd-{} reference {})",
-                    reference_path.display(),
+                    meta.reference_file().display(),
                     meta.renderer,
                     meta.dir.display()
-                ));
-                continue;
-            }
-            let dir = test_path.parent().unwrap_or(results.root()).to_path_buf();
-            for metric in metrics {
-                let acronym = metric.info().acronym;
-                let value_file = dir.join(files.metric_value(&acronym));
-                let map_file = dir.join(files.error_map(&acronym));
-                if let Ok(bytes) = std::fs::read(&value_file) {
-                    if let Ok(v) = serde_json::from_slice::<ValueRecord>(&bytes) {
-                        repeat.metrics.insert(acronym, v.value);
-                        summary.kept += 1;
-                        continue;
+                )),
+                Some(meta) => Ok(meta.reference_file()),
+            };
+            match unscored {
+                Ok(reference_path) => tasks.push(Task {
+                    run,
+                    repeat: k,
+                    what,
+                    scene: entry.scene.clone(),
+                    test_path,
+                    reference_path,
+                    files,
+                    write_pixels,
+                }),
+                Err(why) => {
+                    if write_pixels {
+                        std::fs::write(&pixels_file, Image::read(&test_path)?.pixels_file())?;
                     }
+                    summary.skipped.push(why);
                 }
-                progress(&what, &acronym);
-                let record = match metric {
-                    AnyMetric::Builtin(m) => {
-                        if !references.contains_key(&scene) {
-                            references.insert(scene.clone(), Image::read(&reference_path)?);
-                        }
-                        let reference = &references[&scene];
-                        let test = match &test {
-                            Some(t) => t,
-                            None => test.insert(Image::read(&test_path)?),
-                        };
-                        // A value that cannot be computed (nothing finite to compare) is
-                        // reported for this run and the others go on.
-                        let e = match evaluate(*m, reference, test) {
-                            Ok(e) => e,
-                            Err(e) => {
-                                summary.skipped.push(format!("{what}: {acronym}: {e}"));
-                                continue;
-                            }
-                        };
-                        if let (Some(map), true) = (&e.map, first) {
-                            map.write_png(&map_file)?;
-                        }
-                        ValueRecord {
-                            metric: acronym.clone(),
-                            value: e.value,
-                            nonfinite_reference: e.nonfinite_reference,
-                            nonfinite_test: e.nonfinite_test,
-                        }
-                    }
-                    AnyMetric::External(x) => {
-                        let map = first.then_some(map_file.as_path());
-                        let value = x
-                            .run(&reference_path, &test_path, map)
-                            .map_err(|e| io::Error::other(format!("{what}: {e}")))?;
-                        ValueRecord { metric: acronym.clone(), value, nonfinite_reference: 0, nonfinite_test: 0 }
-                    }
-                };
-                summary.computed += 1;
-                if !record.value.is_finite() {
-                    // Reported here and left out of the run's values (it then ranks last), never averaged.
-                    summary.skipped.push(format!(
-                        "{what}: {acronym} is {} ({} non-finite pixels in the reference, {} in the result)",
-                        record.value, record.nonfinite_reference, record.nonfinite_test
-                    ));
-                    continue;
-                }
-                std::fs::write(&value_file, serde_json::to_vec_pretty(&record)?)?;
-                repeat.metrics.insert(acronym, record.value);
             }
         }
+    }
+
+    // Each scene's reference, read and prepared for every built-in metric
+    // once, before the runs on it are scored.
+    let mut wanted: BTreeMap<&str, &Path> = BTreeMap::new();
+    for task in &tasks {
+        wanted.insert(task.scene.as_str(), task.reference_path.as_path());
+    }
+    let builtins: Vec<Metric> =
+        metrics.iter().filter_map(|m| if let AnyMetric::Builtin(b) = m { Some(*b) } else { None }).collect();
+    let references: BTreeMap<&str, Reference<'static>> = if builtins.is_empty() {
+        BTreeMap::new()
+    } else {
+        wanted
+            .into_par_iter()
+            .map(|(scene, path)| {
+                let reference = Reference::new(
+                    Image::read(path).map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))?,
+                );
+                builtins.par_iter().for_each(|m| reference.prepare(*m));
+                Ok((scene, reference))
+            })
+            .collect::<io::Result<_>>()?
+    };
+    let reference_of = |task: &Task| -> io::Result<&Reference<'static>> {
+        references.get(task.scene.as_str()).ok_or_else(|| io::Error::other(format!("{}: no reference", task.what)))
+    };
+    let scored: Vec<Scored> =
+        tasks.par_iter().map(|task| score(task, metrics, &reference_of, &progress)).collect::<io::Result<_>>()?;
+
+    for (task, scored) in tasks.iter().zip(scored) {
+        let repeat = &mut index.runs[task.run].repeats[task.repeat];
+        repeat.metrics.extend(scored.values);
+        summary.computed += scored.computed;
+        summary.kept += scored.kept;
+        summary.skipped.extend(scored.skipped);
+    }
+    for entry in &mut index.runs {
         entry.summarize();
     }
     let infos: Vec<MetricInfo> = metrics.iter().map(AnyMetric::info).collect();
@@ -197,4 +208,82 @@ pub fn compute(
     });
     results.write_index(index)?;
     Ok(summary)
+}
+
+/// Scores one repeat with every metric whose value file is missing.
+fn score<'r>(
+    task: &Task,
+    metrics: &[AnyMetric],
+    reference_of: &(impl Fn(&Task) -> io::Result<&'r Reference<'static>> + Sync),
+    progress: &(impl Fn(&str, &str) + Sync),
+) -> io::Result<Scored> {
+    let mut scored = Scored::default();
+    let what = &task.what;
+    // Error maps are drawn for the first repeat only: the viewer shows it.
+    let first = task.repeat == 0;
+    let dir = task.test_path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut test: Option<Image> = None;
+    if task.write_pixels {
+        let image = test.insert(Image::read(&task.test_path)?);
+        std::fs::write(task.test_path.with_file_name(task.files.pixels()), image.pixels_file())?;
+    }
+    for metric in metrics {
+        let acronym = metric.info().acronym;
+        let value_file = dir.join(task.files.metric_value(&acronym));
+        let map_file = dir.join(task.files.error_map(&acronym));
+        if let Ok(bytes) = std::fs::read(&value_file) {
+            if let Ok(v) = serde_json::from_slice::<ValueRecord>(&bytes) {
+                scored.values.push((acronym, v.value));
+                scored.kept += 1;
+                continue;
+            }
+        }
+        progress(what, &acronym);
+        let record = match metric {
+            AnyMetric::Builtin(m) => {
+                let reference = reference_of(task)?;
+                let test = match &test {
+                    Some(t) => t,
+                    None => test.insert(Image::read(&task.test_path)?),
+                };
+                // A value that cannot be computed (nothing finite to compare) is
+                // reported for this run and the others go on.
+                let e = match evaluate_against(*m, reference, test) {
+                    Ok(e) => e,
+                    Err(e) => {
+                        scored.skipped.push(format!("{what}: {acronym}: {e}"));
+                        continue;
+                    }
+                };
+                if let (Some(map), true) = (&e.map, first) {
+                    map.write_png(&map_file)?;
+                }
+                ValueRecord {
+                    metric: acronym.clone(),
+                    value: e.value,
+                    nonfinite_reference: e.nonfinite_reference,
+                    nonfinite_test: e.nonfinite_test,
+                }
+            }
+            AnyMetric::External(x) => {
+                let map = first.then_some(map_file.as_path());
+                let value = x
+                    .run(&task.reference_path, &task.test_path, map)
+                    .map_err(|e| io::Error::other(format!("{what}: {e}")))?;
+                ValueRecord { metric: acronym.clone(), value, nonfinite_reference: 0, nonfinite_test: 0 }
+            }
+        };
+        scored.computed += 1;
+        if !record.value.is_finite() {
+            // Reported here and left out of the run's values (it then ranks last), never averaged.
+            scored.skipped.push(format!(
+                "{what}: {acronym} is {} ({} non-finite pixels in the reference, {} in the result)",
+                record.value, record.nonfinite_reference, record.nonfinite_test
+            ));
+            continue;
+        }
+        std::fs::write(&value_file, serde_json::to_vec_pretty(&record)?)?;
+        scored.values.push((acronym, record.value));
+    }
+    Ok(scored)
 }
