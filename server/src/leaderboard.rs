@@ -144,7 +144,15 @@ struct SeasonData {
     tags: BTreeMap<String, BTreeSet<String>>,
     /// Public boards already assembled, by (sort, tag).
     boards: Mutex<HashMap<BoardKey, Arc<Board>>>,
+    /// Private pages' boards already assembled, by (set id, sort, tag): a
+    /// set's runs never change once stored, so a page is assembled once per
+    /// version of the season's data.
+    pages: Mutex<HashMap<(String, BoardKey), Arc<Board>>>,
 }
+
+/// Private pages' boards kept per season at most; when full the map is
+/// emptied (set ids come from requests, so it must not grow without bound).
+const MAX_CACHED_PAGES: usize = 1024;
 
 /// Seasons kept in memory at most: the season is a query parameter, so
 /// without a bound any number of (even empty) seasons could be loaded.
@@ -201,6 +209,7 @@ impl BoardCache {
             runs: crate::results::runs(pool, Selection::Published(season)).await?,
             tags,
             boards: Mutex::new(HashMap::new()),
+            pages: Mutex::new(HashMap::new()),
         });
         if let Ok(mut map) = self.0.lock() {
             map.keep(season, data.clone());
@@ -210,7 +219,9 @@ impl BoardCache {
 }
 
 /// Builds the board of `query.season` (or `extra`'s season), adding
-/// `extra` (a private set) if given.
+/// `extra` (a private set) if given. Boards are assembled once per version
+/// of the season's published data: public ones per (sort, tag), private
+/// pages' per set too.
 pub async fn build(
     pool: &AnyPool,
     cache: &BoardCache,
@@ -224,33 +235,43 @@ pub async fn build(
         (None, None) => crate::results::current_season(pool).await?,
     };
     let data = cache.season(pool, season).await?;
-    let highlighted = extra.map(|s| s.id.as_str());
-    match extra.filter(|e| !data.sets.iter().any(|s| s.id == e.id)) {
-        None if highlighted.is_none() => {
-            let key = (query.sort.clone(), query.tag.clone());
-            if let Some(board) = data.boards.lock().ok().and_then(|b| b.get(&key).cloned()) {
-                return Ok(board);
-            }
-            let board = Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, None));
-            if let Ok(mut boards) = data.boards.lock() {
-                // Bounded: only metric and tag names that exist are worth keeping.
-                if boards.len() < 256 {
-                    boards.insert(key, board.clone());
-                }
-            }
-            Ok(board)
+    let key = (query.sort.clone(), query.tag.clone());
+    let Some(extra) = extra else {
+        if let Some(board) = data.boards.lock().ok().and_then(|b| b.get(&key).cloned()) {
+            return Ok(board);
         }
-        None => Ok(Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, highlighted))),
-        Some(extra) => {
-            let mut sets = data.sets.clone();
-            sets.push(extra.clone());
-            let mut runs = data.runs.clone();
-            runs.extend(crate::results::runs(pool, Selection::One(&extra.id)).await?);
-            let mut tags = data.tags.clone();
-            crate::results::scene_tags(pool, Selection::One(&extra.id), &mut tags).await?;
-            Ok(Arc::new(assemble(season, &sets, &runs, &tags, query, highlighted)))
+        let board = Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, None));
+        if let Ok(mut boards) = data.boards.lock() {
+            // Bounded: only metric and tag names that exist are worth keeping.
+            if boards.len() < 256 {
+                boards.insert(key, board.clone());
+            }
         }
+        return Ok(board);
+    };
+    let page_key = (extra.id.clone(), key);
+    if let Some(board) = data.pages.lock().ok().and_then(|p| p.get(&page_key).cloned()) {
+        return Ok(board);
     }
+    let highlighted = Some(extra.id.as_str());
+    let board = if data.sets.iter().any(|s| s.id == extra.id) {
+        Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, highlighted))
+    } else {
+        let mut sets = data.sets.clone();
+        sets.push(extra.clone());
+        let mut runs = data.runs.clone();
+        runs.extend(crate::results::runs(pool, Selection::One(&extra.id)).await?);
+        let mut tags = data.tags.clone();
+        crate::results::scene_tags(pool, Selection::One(&extra.id), &mut tags).await?;
+        Arc::new(assemble(season, &sets, &runs, &tags, query, highlighted))
+    };
+    if let Ok(mut pages) = data.pages.lock() {
+        if pages.len() >= MAX_CACHED_PAGES {
+            pages.clear();
+        }
+        pages.insert(page_key, board.clone());
+    }
+    Ok(board)
 }
 
 /// The runs of `runs` scored against each scene's current reference: the
@@ -537,6 +558,7 @@ mod tests {
                 runs: Vec::new(),
                 tags: BTreeMap::new(),
                 boards: Mutex::new(HashMap::new()),
+                pages: Mutex::new(HashMap::new()),
             })
         };
         let mut cache = CachedSeasons::default();

@@ -123,6 +123,13 @@ on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its
     // Ada's (better) technique ranks first on her private page.
     let standings = &private[private.find("id=\"standings\"").unwrap()..];
     assert!(standings.find("ada-filter").unwrap() < standings.find("bob-filter").unwrap());
+    // The page's board is kept once assembled, and assembled anew when the
+    // published board changes: Bob's set leaves it and comes back.
+    for (action, shown) in [("unpublish", false), ("publish", true)] {
+        bob.api(Method::POST, format!("{}/api/v1/results/{bobs}/{action}", server.url)).send().await.unwrap();
+        let (status, private) = page(ada.browser.clone(), format!("/results/{adas}")).await;
+        assert_eq!((status, private.contains("bob-filter")), (200, shown), "after Bob's {action}");
+    }
     for (client, who) in [(bob.browser.clone(), "another user"), (reqwest::Client::new(), "anonymous")] {
         assert_eq!(page(client, format!("/results/{adas}")).await.0, 404, "{who}");
     }
