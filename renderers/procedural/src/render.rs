@@ -214,15 +214,18 @@ pub fn render_features(scene: &Scene, spp: u64, request: u64, wanted: &[(Feature
             let mut index = 0u64;
             while index < total {
                 let n = ((total - index) as usize).min(LANES);
-                for (p, column) in params.iter_mut().zip(columns.iter_mut()).take(n) {
+                let mut filled = 0;
+                while filled < n {
                     if s == spp {
                         s = 0;
                         x += 1;
                         pixel = sampler.pixel(x, y as u32);
                     }
-                    *p = sampler.pixel_sample(&pixel, &strata, s, needed);
-                    *column = x as usize * channels;
-                    s += 1;
+                    let m = (n - filled).min((spp - s) as usize);
+                    sampler.pixel_samples(&pixel, &strata, s, needed, &mut params[filled..filled + m]);
+                    columns[filled..filled + m].fill(x as usize * channels);
+                    s += m as u64;
+                    filled += m;
                 }
                 machine.run_samples(&params[..n]).map_err(|e| scene.runtime_error(e.pos, &e.message))?;
                 for (c, slot) in slots.iter().enumerate() {

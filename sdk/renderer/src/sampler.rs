@@ -69,25 +69,104 @@ impl Divisor {
 /// the orbit of `i` returns below `n`, in under two passes on average).
 #[inline]
 pub fn permute(i: u64, n: u64, key: u64) -> u64 {
-    if n <= 1 {
-        return 0;
-    }
-    let bits = 64 - (n - 1).leading_zeros();
-    let mask = u64::MAX >> (64 - bits);
-    let (s1, s2) = ((bits / 2).max(1), (bits / 3).max(1));
-    let keys = [mix(key), mix(key ^ 0x5851_F42D_4C95_7F2D), mix(key ^ 0x1405_7B7E_F767_814F)];
-    let mut v = i & mask;
-    loop {
-        for k in keys {
-            v = (v ^ k) & mask;
-            v = v.wrapping_mul((k >> 21) | 1) & mask;
-            v ^= v >> s1;
-            v = v.wrapping_add(k >> 43) & mask;
-            v = v.wrapping_mul(0x6935_FA69_0929_EB3F) & mask;
-            v ^= v >> s2;
+    Permutation::new(n, key).apply(i)
+}
+
+/// [`permute`] for one `(n, key)`, its round keys hashed once.
+#[derive(Debug, Clone, Copy, Default)]
+struct Permutation {
+    n: u64,
+    mask: u64,
+    shifts: (u32, u32),
+    /// Per round: the key xor-ed in, the odd multiplier, the key added.
+    rounds: [(u64, u64, u64); 3],
+}
+
+impl Permutation {
+    #[inline(always)]
+    fn new(n: u64, key: u64) -> Permutation {
+        if n <= 1 {
+            return Permutation { n, ..Default::default() };
         }
-        if v < n {
-            return v;
+        let bits = 64 - (n - 1).leading_zeros();
+        let keys = [mix(key), mix(key ^ 0x5851_F42D_4C95_7F2D), mix(key ^ 0x1405_7B7E_F767_814F)];
+        Permutation {
+            n,
+            mask: u64::MAX >> (64 - bits),
+            shifts: ((bits / 2).max(1), (bits / 3).max(1)),
+            rounds: keys.map(|k| (k, (k >> 21) | 1, k >> 43)),
+        }
+    }
+
+    /// [`Permutation::apply`] to each value of `values` in place. Below 2³²
+    /// values (every budget under 2³² spp) the rounds run in 32-bit lanes:
+    /// the same values, since every step keeps only the low `bits` bits;
+    /// lanes that fall outside `0..n` take further rounds together.
+    #[inline(always)]
+    fn apply_all(&self, values: &mut [u64]) {
+        const LANES: usize = 64;
+        if self.n <= 1 {
+            values.fill(0);
+            return;
+        }
+        if self.mask > u32::MAX as u64 || values.len() > LANES {
+            values.iter_mut().for_each(|v| *v = self.apply(*v));
+            return;
+        }
+        let (mask, (s1, s2), n) = (self.mask as u32, self.shifts, self.n);
+        let rounds = self.rounds.map(|(x, m, a)| (x as u32, m as u32, a as u32));
+        let round = |mut v: u32| {
+            for (xor, multiply, add) in rounds {
+                v = (v ^ xor) & mask;
+                v = v.wrapping_mul(multiply) & mask;
+                v ^= v >> s1;
+                v = v.wrapping_add(add) & mask;
+                v = v.wrapping_mul(0x6935_FA69_0929_EB3F_u64 as u32) & mask;
+                v ^= v >> s2;
+            }
+            v
+        };
+        let mut lanes = [0u32; LANES];
+        let lanes = &mut lanes[..values.len()];
+        for (l, v) in lanes.iter_mut().zip(values.iter()) {
+            *l = round((*v & self.mask) as u32);
+        }
+        loop {
+            let mut again = false;
+            for l in lanes.iter_mut() {
+                let outside = *l as u64 >= n;
+                again |= outside;
+                let next = round(*l);
+                *l = if outside { next } else { *l };
+            }
+            if !again {
+                break;
+            }
+        }
+        for (v, l) in values.iter_mut().zip(lanes.iter()) {
+            *v = *l as u64;
+        }
+    }
+
+    #[inline(always)]
+    fn apply(&self, i: u64) -> u64 {
+        if self.n <= 1 {
+            return 0;
+        }
+        let (mask, (s1, s2)) = (self.mask, self.shifts);
+        let mut v = i & mask;
+        loop {
+            for (xor, multiply, add) in self.rounds {
+                v = (v ^ xor) & mask;
+                v = v.wrapping_mul(multiply) & mask;
+                v ^= v >> s1;
+                v = v.wrapping_add(add) & mask;
+                v = v.wrapping_mul(0x6935_FA69_0929_EB3F) & mask;
+                v ^= v >> s2;
+            }
+            if v < self.n {
+                return v;
+            }
         }
     }
 }
@@ -218,6 +297,121 @@ impl Sampler {
         p
     }
 
+    /// Samples `s0..s0 + out.len()` of a pixel: the values of
+    /// [`Sampler::pixel_sample`], computed stage by stage across up to 64
+    /// samples at once. One sample is a chain of dependent permutation
+    /// rounds that waits on itself; a stage's samples are independent, so
+    /// the processor overlaps them.
+    pub fn pixel_samples(&self, pixel: &PixelSeed, strata: &Strata, s0: u64, needed: u8, out: &mut [[f64; 7]]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            /// # Safety
+            /// The CPU must support AVX2.
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2(
+                sampler: &Sampler,
+                pixel: &PixelSeed,
+                strata: &Strata,
+                s0: u64,
+                needed: u8,
+                out: &mut [[f64; 7]],
+            ) {
+                sampler.pixel_samples_in(pixel, strata, s0, needed, out)
+            }
+            // SAFETY: the feature was just detected; the values are the same (integer lanes).
+            return unsafe { avx2(self, pixel, strata, s0, needed, out) };
+        }
+        self.pixel_samples_in(pixel, strata, s0, needed, out)
+    }
+
+    /// [`Sampler::pixel_samples`], compiled into each instruction set's build.
+    #[inline(always)]
+    fn pixel_samples_in(&self, pixel: &PixelSeed, strata: &Strata, s0: u64, needed: u8, out: &mut [[f64; 7]]) {
+        const BATCH: usize = 64;
+        let has = |d: usize| needed & (1 << d) != 0;
+        let below_one = |v: f64| v.min(1.0 - f64::EPSILON);
+        let inv_k = strata.inv_k;
+        // The line permutations of a pixel as tables, made once when there
+        // are few lines (up to 256 spp; their values fit a byte).
+        const FEW_LINES: usize = 16;
+        let k = strata.k as usize;
+        let mut tables = [[0u8; FEW_LINES * FEW_LINES]; 2];
+        for (first, out) in (s0..).step_by(BATCH).zip(out.chunks_mut(BATCH)) {
+            let n = out.len();
+            out.iter_mut().for_each(|p| *p = [0.0; 7]);
+            for (which, d) in [(0usize, 0u64), (1, 2), (2, 5)] {
+                if !(has(d as usize) || has(d as usize + 1)) {
+                    continue;
+                }
+                let cells = Permutation::new(strata.cells, pixel.cell_keys[which]);
+                let (mut rows, mut columns) = ([0u64; BATCH], [0u64; BATCH]);
+                for (i, c) in columns.iter_mut().take(n).enumerate() {
+                    *c = first + i as u64;
+                }
+                cells.apply_all(&mut columns[..n]);
+                for i in 0..n {
+                    (rows[i], columns[i]) = strata.by_k.div_mod(columns[i]);
+                }
+                // Sub-column of each sample in its cell from its column's
+                // permutation of rows; likewise the sub-row.
+                let keyed = k <= FEW_LINES;
+                if keyed {
+                    // Each line's whole permutation, in lanes: table[axis][line · k + position].
+                    for (axis, table) in tables.iter_mut().enumerate() {
+                        for line in 0..k {
+                            let mut row = [0u64; FEW_LINES];
+                            for (position, v) in row.iter_mut().enumerate() {
+                                *v = position as u64;
+                            }
+                            let p = Permutation::new(strata.k, pixel.line_keys[which][axis] ^ mix(line as u64));
+                            p.apply_all(&mut row[..k]);
+                            for (t, v) in table[line * k..line * k + k].iter_mut().zip(row) {
+                                *t = v as u8;
+                            }
+                        }
+                    }
+                }
+                let key = |axis: usize, line: u64| pixel.line_keys[which][axis] ^ mix(line);
+                for (i, p) in out.iter_mut().enumerate() {
+                    let s = first + i as u64;
+                    let h = mix(pixel.seed ^ (s << 4 | d));
+                    let (ux, uy) =
+                        ((h >> 32) as i64 as f64 * TWO_TO_MINUS_32, (h & 0xFFFF_FFFF) as i64 as f64 * TWO_TO_MINUS_32);
+                    let (column, row) = (columns[i], rows[i]);
+                    let (sub_x, sub_y) = if keyed {
+                        (
+                            tables[0][column as usize * k + row as usize] as u64,
+                            tables[1][row as usize * k + column as usize] as u64,
+                        )
+                    } else {
+                        (permute(row, strata.k, key(0, column)), permute(column, strata.k, key(1, row)))
+                    };
+                    let (c, r) = (column as i64 as f64, row as i64 as f64);
+                    let (sx, sy) = (sub_x as i64 as f64, sub_y as i64 as f64);
+                    let (x, y) =
+                        (below_one((c + (sx + ux) * inv_k) * inv_k), below_one((r + (sy + uy) * inv_k) * inv_k));
+                    match which {
+                        0 => (p[0], p[1]) = (pixel.x as f64 + x, pixel.y as f64 + y),
+                        1 => (p[2], p[3]) = (x, y),
+                        _ => (p[5], p[6]) = (x, y),
+                    }
+                }
+            }
+            if has(4) {
+                let mut strata_of = [0u64; BATCH];
+                for (i, t) in strata_of.iter_mut().take(n).enumerate() {
+                    *t = first + i as u64;
+                }
+                Permutation::new(strata.spp, pixel.time_key).apply_all(&mut strata_of[..n]);
+                for (i, p) in out.iter_mut().enumerate() {
+                    let s = first + i as u64;
+                    let u = uniform(mix(pixel.seed ^ (s << 4 | 4)));
+                    p[4] = below_one((strata_of[i] as i64 as f64 + u) * strata.inv_spp);
+                }
+            }
+        }
+    }
+
     /// All seven parameters of free sample `index` of the request.
     pub fn free_sample(&self, index: u64) -> [f64; 7] {
         let seed = mix(u64::MAX - self.request);
@@ -274,6 +468,34 @@ mod tests {
                 n = mix(n);
                 for v in [n & 0xFFFF, n & 0xFFFF_FFFF, n >> 8, d - 1, d, d + 1, u32::MAX as u64] {
                     assert_eq!(by.div_mod(v), (v / d, v % d), "{v} / {d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn samples_in_batches_are_the_samples_one_at_a_time() {
+        let sampler = Sampler::new(37, 23, 5);
+        // Budgets square and not, more lines than a batch (k = 71), batches
+        // starting mid-pixel, and every subset of the pairs and TIME.
+        for spp in [64u64, 1, 2, 3, 5, 16, 17, 100, 5000] {
+            let strata = Strata::new(spp);
+            for needed in [0x7Fu8, 0b11, 0b1_0000, 0b110_0000, 0b1100, 0b1_0011] {
+                for (x, y) in [(0, 0), (36, 22), (7, 11)] {
+                    let pixel = sampler.pixel(x, y);
+                    for (s0, count) in [(0, spp), (spp / 3, spp - spp / 3), (spp - 1, 1)] {
+                        let mut batch = vec![[0.0; 7]; count.min(300) as usize];
+                        sampler.pixel_samples(&pixel, &strata, s0, needed, &mut batch);
+                        for (i, b) in batch.iter().enumerate() {
+                            let s = s0 + i as u64;
+                            let one = sampler.pixel_sample(&pixel, &strata, s, needed);
+                            assert_eq!(
+                                one.map(f64::to_bits),
+                                b.map(f64::to_bits),
+                                "spp {spp}, {needed:#b}, ({x}, {y}), s {s}"
+                            );
+                        }
+                    }
                 }
             }
         }
