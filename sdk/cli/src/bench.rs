@@ -172,13 +172,7 @@ fn metrics_fixture(root: &Path, runs: usize, size: u32) -> anyhow::Result<()> {
     use fbksd_exchange::results::{IndexEntry, Repeat, ResultsDir, RunFiles};
     use fbksd_iqa::image::write_exr;
     let n = size as usize;
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut noise = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-    };
+    let mut noise = crate::iqa::noise(0x9E37_79B9_7F4A_7C15);
     let scenes = 5;
     let references: Vec<Vec<f32>> = (0..scenes)
         .map(|s| {

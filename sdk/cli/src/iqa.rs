@@ -96,16 +96,21 @@ fn one(args: MetricArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn bench(size: u32) -> anyhow::Result<()> {
-    // A smooth HDR-ish reference and a noisy test image, deterministic.
-    let n = size as usize;
-    let mut state = 0x2545_F491_4F6C_DD1Du64;
-    let mut noise = move || {
+/// Deterministic noise in [−0.5, 0.5) (xorshift64) for the benchmarks' images.
+pub(crate) fn noise(seed: u64) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
         state ^= state << 13;
         state ^= state >> 7;
         state ^= state << 17;
         (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-    };
+    }
+}
+
+fn bench(size: u32) -> anyhow::Result<()> {
+    // A smooth HDR-ish reference and a noisy test image, deterministic.
+    let n = size as usize;
+    let mut noise = noise(0x2545_F491_4F6C_DD1D);
     let mut r = Vec::with_capacity(n * n * 3);
     let mut t = Vec::with_capacity(n * n * 3);
     for y in 0..n {
