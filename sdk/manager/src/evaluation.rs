@@ -19,6 +19,7 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::io;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 /// A metric to compute: built in or external.
 #[derive(Debug, Clone)]
@@ -108,8 +109,8 @@ struct Scored {
 /// Computes every missing metric value of every `ok` run.
 ///
 /// Each scene's reference is read and prepared once ([`Reference`]: ꟻLIP's
-/// filtered reference at each exposure) for all the runs on it, then the
-/// repeats are scored in parallel. `progress` is called from the worker
+/// filtered reference at each exposure) for all the runs on it that lack a
+/// value, then the repeats are scored in parallel. `progress` is called from the worker
 /// threads as each value starts.
 pub fn compute(
     results: &ResultsDir,
@@ -163,30 +164,40 @@ pub fn compute(
         }
     }
 
-    // Each scene's reference, read and prepared for every built-in metric
-    // once, before the runs on it are scored.
-    let mut wanted: BTreeMap<&str, &Path> = BTreeMap::new();
-    for task in &tasks {
-        wanted.insert(task.scene.as_str(), task.reference_path.as_path());
-    }
+    // Each scene's reference, read once. The scenes where some run still
+    // lacks a built-in value are read and prepared up front, in parallel; a
+    // re-run that finds every value in place reads no reference (a value
+    // file that turns out unreadable reads its scene's on demand).
     let builtins: Vec<Metric> =
         metrics.iter().filter_map(|m| if let AnyMetric::Builtin(b) = m { Some(*b) } else { None }).collect();
-    let references: BTreeMap<&str, Reference<'static>> = if builtins.is_empty() {
-        BTreeMap::new()
-    } else {
-        wanted
-            .into_par_iter()
-            .map(|(scene, path)| {
-                let reference = Reference::new(
-                    Image::read(path).map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))?,
-                );
-                builtins.par_iter().for_each(|m| reference.prepare(*m));
-                Ok((scene, reference))
-            })
-            .collect::<io::Result<_>>()?
+    let mut lacking: BTreeMap<&str, (&Path, Vec<Metric>)> = BTreeMap::new();
+    for task in &tasks {
+        let dir = task.test_path.parent().unwrap_or(Path::new("."));
+        for m in &builtins {
+            if !dir.join(task.files.metric_value(m.acronym())).is_file() {
+                let (_, wanted) =
+                    lacking.entry(task.scene.as_str()).or_insert((task.reference_path.as_path(), Vec::new()));
+                if !wanted.contains(m) {
+                    wanted.push(*m);
+                }
+            }
+        }
+    }
+    let references: BTreeMap<&str, OnceLock<io::Result<Reference<'static>>>> =
+        tasks.iter().map(|t| (t.scene.as_str(), OnceLock::new())).collect();
+    let load = |path: &Path| {
+        Image::read(path).map(Reference::new).map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))
     };
+    lacking.into_par_iter().for_each(|(scene, (path, wanted))| {
+        if let Ok(reference) = references[scene].get_or_init(|| load(path)) {
+            wanted.par_iter().for_each(|m| reference.prepare(*m));
+        }
+    });
     let reference_of = |task: &Task| -> io::Result<&Reference<'static>> {
-        references.get(task.scene.as_str()).ok_or_else(|| io::Error::other(format!("{}: no reference", task.what)))
+        references[task.scene.as_str()]
+            .get_or_init(|| load(&task.reference_path))
+            .as_ref()
+            .map_err(|e| io::Error::new(e.kind(), e.to_string()))
     };
     let scored: Vec<Scored> =
         tasks.par_iter().map(|task| score(task, metrics, &reference_of, &progress)).collect::<io::Result<_>>()?;
