@@ -109,24 +109,83 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
 /// Dimensions used per bounce.
 const DIMS_PER_BOUNCE: u32 = 8;
 
-/// Traces one camera path.
-pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) -> SampleValues {
-    let mut out = SampleValues::default();
-    let mut ray = scene.camera.ray(pos.image_x, pos.image_y, pos.lens, pos.time);
-    let mut l = Vec3::ZERO;
-    let mut beta = Vec3::ONE;
-    // Per-channel share of later contributions that counts as diffuse (set at the first hit).
-    let mut diffuse_share = Vec3::ZERO;
-    let mut diffuse = Vec3::ZERO;
-    let mut specular_bounce = false;
-    let mut found_non_specular = false;
-    let mut eta_scale = 1.0f32;
-    let mut prev: Option<(Vec3, f32)> = None; // (origin of the last bounce, its BSDF pdf)
-    let mut depth = 0u32;
-    let mut rays = 0u32;
-    loop {
-        rays += 1;
-        let hit = scene.intersect(&ray, f32::INFINITY);
+/// One camera path in flight. A path stops at each ray it needs traced,
+/// so that a batch of paths can hand all their rays to Embree at once
+/// (see [`Batch`]); each path is still a pure function of its sample.
+#[derive(Debug, Clone)]
+struct Path {
+    out: SampleValues,
+    wanted: Wanted,
+    light_u: [f32; 2],
+    dims: Dimensions,
+    /// The ray to trace next.
+    ray: Ray,
+    l: Vec3,
+    beta: Vec3,
+    /// Per-channel share of later contributions that counts as diffuse (set at the first hit).
+    diffuse_share: Vec3,
+    diffuse: Vec3,
+    specular_bounce: bool,
+    found_non_specular: bool,
+    eta_scale: f32,
+    /// Origin of the last bounce and its BSDF pdf.
+    prev: Option<(Vec3, f32)>,
+    depth: u32,
+    /// Whether the path wants its next ray traced.
+    alive: bool,
+    /// What the pending shadow ray brings if nothing blocks it.
+    pending: Unoccluded,
+}
+
+/// The contributions of a light sample, added once its shadow ray is found clear.
+#[derive(Debug, Clone, Copy, Default)]
+struct Unoccluded {
+    color: Vec3,
+    diffuse: Vec3,
+    /// DIRECT_LIGHT, when this light sample is the first hit's.
+    direct: Option<Vec3>,
+}
+
+/// A segment to test for occlusion: a ray and how far along it to look.
+#[derive(Debug, Clone, Copy)]
+pub struct Segment {
+    /// The ray.
+    pub ray: Ray,
+    /// Its length.
+    pub t_max: f32,
+}
+
+impl Path {
+    fn new(scene: &Scene, pos: &Position, dims: Dimensions, wanted: Wanted) -> Path {
+        Path {
+            out: SampleValues::default(),
+            wanted,
+            light_u: pos.light,
+            dims,
+            ray: scene.camera.ray(pos.image_x, pos.image_y, pos.lens, pos.time),
+            l: Vec3::ZERO,
+            beta: Vec3::ONE,
+            diffuse_share: Vec3::ZERO,
+            diffuse: Vec3::ZERO,
+            specular_bounce: false,
+            found_non_specular: false,
+            eta_scale: 1.0,
+            prev: None,
+            depth: 0,
+            alive: true,
+            pending: Unoccluded::default(),
+        }
+    }
+
+    /// Takes what the path's ray hit: adds emission and features, samples
+    /// a light and the BSDF, and sets the next ray (or ends the path).
+    /// Returns the light sample's shadow segment, to be answered by
+    /// [`Path::shadow_answered`] before the next ray is traced.
+    fn hit_answered(&mut self, scene: &Scene, hit: Option<SurfaceHit>) -> Option<Segment> {
+        let wanted = self.wanted;
+        let dims = self.dims;
+        self.out.rays += 1;
+        let ray = self.ray;
         // Emission the path found: the environment, or an area light it hit.
         let emitter = match &hit {
             None => scene.environment.map(|l| (l, Vec3::ZERO, Vec3::ZERO)),
@@ -137,148 +196,236 @@ pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) 
             let le = light.emitted(n, -ray.dir);
             if !le.is_black() {
                 // Weighted against the light sample that could have found it (MIS).
-                let w = match prev {
-                    Some((p, pdf)) if !specular_bounce => {
+                let w = match self.prev {
+                    Some((p, pdf)) if !self.specular_bounce => {
                         power_heuristic(pdf, scene.light_probability(li) * light.pdf(p, ray.dir, point, n))
                     }
                     _ => 1.0,
                 };
-                let c = beta * le * w;
-                l += c;
-                if depth > 0 {
-                    diffuse += c * diffuse_share;
+                let c = self.beta * le * w;
+                self.l += c;
+                if self.depth > 0 {
+                    self.diffuse += c * self.diffuse_share;
                 }
             }
         }
-        let Some(hit) = hit else { break };
+        self.alive = false;
+        let hit = hit?;
         let wo = -ray.dir;
         let shape = &scene.shapes[hit.shape as usize];
         let material = &scene.materials[shape.material as usize];
         let bsdf = material.bsdf(hit.uv);
+        let depth = self.depth;
         // Geometry features.
         if wanted.geometry {
             if depth == 0 {
-                out.depth = hit.t;
+                self.out.depth = hit.t;
             }
             let features =
                 || HitFeatures { world: hit.p, normal: hit.ns.face_forward(wo), albedo: material.albedo(hit.uv) };
             if depth < 2 {
-                out.hits[depth as usize] = features();
+                self.out.hits[depth as usize] = features();
             }
-            if !found_non_specular && !bsdf.is_delta() {
-                found_non_specular = true;
-                out.non_specular = features();
+            if !self.found_non_specular && !bsdf.is_delta() {
+                self.found_non_specular = true;
+                self.out.non_specular = features();
             }
         }
         if depth >= scene.max_depth {
-            break;
+            return None;
         }
         let frame = Frame::from_normal(hit.ns);
         let wo_local = frame.to_local(wo);
         let base = depth * DIMS_PER_BOUNCE;
-        // Next-event estimation.
+        // Next-event estimation: its shadow ray is answered later; nothing
+        // below depends on it.
+        let mut shadow = None;
         if !bsdf.is_delta() && (wanted.radiance || (depth == 0 && wanted.direct)) {
-            let u_light = if depth == 0 { pos.light } else { [dims.get(base + 1), dims.get(base + 2)] };
-            let lc = sample_light(
-                scene,
-                &hit,
-                &bsdf,
-                &frame,
-                wo_local,
-                dims.get(base),
-                u_light,
-                ray.time,
-                depth == 0 && wanted.direct,
-                &mut rays,
-            );
-            let contribution = beta * lc.reflected;
-            l += contribution;
-            if depth == 0 {
-                if wanted.direct {
-                    out.direct = lc.incident;
+            let u_light = if depth == 0 { self.light_u } else { [dims.get(base + 1), dims.get(base + 2)] };
+            let want_incident = depth == 0 && wanted.direct;
+            if let Some((segment, lc)) =
+                sample_light(scene, &hit, &bsdf, &frame, wo_local, dims.get(base), u_light, ray.time, want_incident)
+            {
+                let contribution = self.beta * lc.reflected;
+                let mut pending = Unoccluded { color: contribution, ..Unoccluded::default() };
+                if depth == 0 {
+                    if wanted.direct {
+                        pending.direct = Some(lc.incident);
+                    }
+                    if wanted.diffuse && !contribution.is_black() {
+                        // Split by lobe at the light direction.
+                        let part = bsdf.eval_diffuse_part(wo_local, lc.wi_local, wanted.roughness_threshold);
+                        pending.diffuse = share(part, bsdf.eval(wo_local, lc.wi_local)) * contribution;
+                    }
+                } else {
+                    pending.diffuse = contribution * self.diffuse_share;
                 }
-                if wanted.diffuse && !contribution.is_black() {
-                    // Split by lobe at the light direction.
-                    let part = bsdf.eval_diffuse_part(wo_local, lc.wi_local, wanted.roughness_threshold);
-                    diffuse += share(part, bsdf.eval(wo_local, lc.wi_local)) * contribution;
-                }
-            } else {
-                diffuse += contribution * diffuse_share;
+                self.pending = pending;
+                shadow = Some(segment);
             }
         } else if depth == 0 && wanted.direct {
             // A specular first hit still receives direct light: measured as a white Lambertian would.
             let lambert = Bsdf::Diffuse(crate::bsdf::diffuse::Diffuse { reflectance: Vec3::ONE });
             let up = Vec3 { x: 0.0, y: 0.0, z: 1.0 };
             let frame = Frame::from_normal(hit.ns.face_forward(wo));
-            out.direct =
-                sample_light(scene, &hit, &lambert, &frame, up, dims.get(base), pos.light, ray.time, true, &mut rays)
-                    .incident;
+            if let Some((segment, lc)) =
+                sample_light(scene, &hit, &lambert, &frame, up, dims.get(base), self.light_u, ray.time, true)
+            {
+                self.pending = Unoccluded { direct: Some(lc.incident), ..Unoccluded::default() };
+                shadow = Some(segment);
+            }
         }
+        if shadow.is_some() {
+            self.out.rays += 1;
+        }
+        // A segment of no length is blocked by the surface it leaves.
+        let shadow = shadow.filter(|s| s.t_max > 0.0);
         // Without radiance, the path is done once the features are.
-        if !wanted.radiance && (!wanted.geometry || (depth >= 1 && found_non_specular)) {
-            break;
+        if !wanted.radiance && (!wanted.geometry || (depth >= 1 && self.found_non_specular)) {
+            return shadow;
         }
         // Continue the path by sampling the BSDF.
         let Some(s) = bsdf.sample(wo_local, dims.get(base + 3), [dims.get(base + 4), dims.get(base + 5)]) else {
-            break;
+            return shadow;
         };
         let wi = frame.to_world(s.wi);
         let weight = s.f * (s.wi.z.abs() / s.pdf);
         if depth == 0 && wanted.diffuse {
-            diffuse_share = if s.delta {
+            self.diffuse_share = if s.delta {
                 Vec3::splat(if s.roughness >= wanted.roughness_threshold { 1.0 } else { 0.0 })
             } else {
                 share(bsdf.eval_diffuse_part(wo_local, s.wi, wanted.roughness_threshold), bsdf.eval(wo_local, s.wi))
             };
         }
-        beta *= weight;
-        specular_bounce = s.delta;
+        self.beta *= weight;
+        self.specular_bounce = s.delta;
         // Radiance is scaled by 1/η² on refraction; roulette should not see that.
-        eta_scale *= s.eta * s.eta;
-        prev = Some((hit.p, s.pdf));
-        ray = spawn(scene, &hit, wi, ray.time);
-        depth += 1;
+        self.eta_scale *= s.eta * s.eta;
+        self.prev = Some((hit.p, s.pdf));
+        self.ray = spawn(scene, &hit, wi, ray.time);
+        self.depth += 1;
         // Russian roulette; not while the path still looks for its first
         // non-specular hit, whose features must not be left to chance.
-        let rr_beta = beta * eta_scale;
-        let searching = wanted.geometry && !found_non_specular;
-        if wanted.radiance && !searching && rr_beta.max_component() < 1.0 && depth > 1 {
+        let rr_beta = self.beta * self.eta_scale;
+        let searching = wanted.geometry && !self.found_non_specular;
+        if wanted.radiance && !searching && rr_beta.max_component() < 1.0 && self.depth > 1 {
             let q = (1.0 - rr_beta.max_component()).max(0.0);
             if dims.get(base + 6) < q {
-                break;
+                return shadow;
             }
-            beta = beta / (1.0 - q);
+            self.beta = self.beta / (1.0 - q);
         }
-        if !beta.is_finite() || (beta.is_black() && !searching) {
-            break;
+        // A black throughput ends the path, unless it still looks for its features.
+        self.alive = self.beta.is_finite() && (searching || !self.beta.is_black());
+        shadow
+    }
+
+    /// Takes the answer to the shadow segment [`Path::hit_answered`] returned.
+    fn shadow_answered(&mut self, occluded: bool) {
+        let pending = std::mem::take(&mut self.pending);
+        if !occluded {
+            self.l += pending.color;
+            self.diffuse += pending.diffuse;
+            if let Some(direct) = pending.direct {
+                self.out.direct = direct;
+            }
         }
     }
-    out.rays = rays;
-    out.color = l;
-    out.diffuse = diffuse;
-    // A last line of defence: nothing non-finite leaves the renderer. Any
-    // replacement is counted and reported, so it is a visible bug, not a fix.
-    let mut repaired = false;
-    let mut clean = |v: &mut Vec3| {
-        if !v.is_finite() {
+
+    /// The sample's values, with nothing non-finite left in them.
+    fn finish(&self) -> SampleValues {
+        let mut out = self.out;
+        out.color = self.l;
+        out.diffuse = self.diffuse;
+        // A last line of defence: nothing non-finite leaves the renderer. Any
+        // replacement is counted and reported, so it is a visible bug, not a fix.
+        let mut repaired = false;
+        let mut clean = |v: &mut Vec3| {
+            if !v.is_finite() {
+                repaired = true;
+                *v = Vec3::ZERO;
+            }
+        };
+        clean(&mut out.color);
+        clean(&mut out.direct);
+        clean(&mut out.diffuse);
+        for h in out.hits.iter_mut().chain(std::iter::once(&mut out.non_specular)) {
+            clean(&mut h.world);
+            clean(&mut h.normal);
+            clean(&mut h.albedo);
+        }
+        if !out.depth.is_finite() {
             repaired = true;
-            *v = Vec3::ZERO;
+            out.depth = 0.0;
         }
-    };
-    clean(&mut out.color);
-    clean(&mut out.direct);
-    clean(&mut out.diffuse);
-    for h in out.hits.iter_mut().chain(std::iter::once(&mut out.non_specular)) {
-        clean(&mut h.world);
-        clean(&mut h.normal);
-        clean(&mut h.albedo);
+        out.repaired = repaired;
+        out
     }
-    if !out.depth.is_finite() {
-        repaired = true;
-        out.depth = 0.0;
+}
+
+/// Traces camera paths in batches, wavefront style: every live path's
+/// next ray goes to Embree in one stream, then every shadow ray, which
+/// costs less per ray than one call each. Holds its buffers between
+/// batches; one per thread.
+#[derive(Debug, Default)]
+pub struct Batch {
+    paths: Vec<Path>,
+    /// Paths still tracing, by index.
+    live: Vec<u32>,
+    rays: Vec<Ray>,
+    hits: Vec<Option<SurfaceHit>>,
+    segments: Vec<Segment>,
+    /// The path of each segment.
+    owners: Vec<u32>,
+    occluded: Vec<bool>,
+    queries: crate::scene::QueryBuffers,
+}
+
+impl Batch {
+    /// Traces one path per start; the values come back in the same order.
+    pub fn trace(
+        &mut self,
+        scene: &Scene,
+        starts: impl IntoIterator<Item = (Position, Dimensions)>,
+        wanted: &Wanted,
+    ) -> impl Iterator<Item = SampleValues> + '_ {
+        self.paths.clear();
+        self.paths.extend(starts.into_iter().map(|(pos, dims)| Path::new(scene, &pos, dims, *wanted)));
+        self.live.clear();
+        self.live.extend(0..self.paths.len() as u32);
+        while !self.live.is_empty() {
+            self.rays.clear();
+            self.rays.extend(self.live.iter().map(|&i| self.paths[i as usize].ray));
+            scene.intersect_all(&self.rays, &mut self.queries, &mut self.hits);
+            self.segments.clear();
+            self.owners.clear();
+            for (&i, hit) in self.live.iter().zip(self.hits.drain(..)) {
+                let path = &mut self.paths[i as usize];
+                let segment = path.hit_answered(scene, hit);
+                match segment {
+                    Some(segment) => {
+                        self.segments.push(segment);
+                        self.owners.push(i);
+                    }
+                    // No segment: the light sample, if any, was blocked or
+                    // brought nothing.
+                    None => path.shadow_answered(true),
+                }
+            }
+            scene.occluded_all(&self.segments, &mut self.queries, &mut self.occluded);
+            for (&i, &occluded) in self.owners.iter().zip(&self.occluded) {
+                self.paths[i as usize].shadow_answered(occluded);
+            }
+            let paths = &self.paths;
+            self.live.retain(|&i| paths[i as usize].alive);
+        }
+        self.paths.iter().map(Path::finish)
     }
-    out.repaired = repaired;
-    out
+}
+
+/// Traces one camera path (a batch of one).
+pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) -> SampleValues {
+    Batch::default().trace(scene, [(*pos, *dims)], wanted).next().expect("one path in, one out")
 }
 
 /// `a / b` per channel, 0 where `b` is 0.
@@ -308,7 +455,9 @@ struct LightContribution {
     wi_local: Vec3,
 }
 
-/// One light sample at `hit`, with its shadow ray at `time`.
+/// One light sample at `hit`: the shadow segment to `time`'s light and
+/// what the sample brings if that segment is clear. None when no shadow
+/// ray is worth tracing.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn sample_light(
@@ -321,35 +470,30 @@ fn sample_light(
     u: [f32; 2],
     time: f32,
     want_incident: bool,
-    rays: &mut u32,
-) -> LightContribution {
-    let none = LightContribution::default();
-    let Some((li, choose_pdf)) = scene.choose_light(u_choose) else { return none };
+) -> Option<(Segment, LightContribution)> {
+    let (li, choose_pdf) = scene.choose_light(u_choose)?;
     let light = &scene.lights[li as usize];
-    let Some(ls) = light.sample(hit.p, u) else { return none };
+    let ls = light.sample(hit.p, u)?;
     if ls.radiance.is_black() || ls.pdf <= 0.0 {
-        return none;
+        return None;
     }
     let wi_local = frame.to_local(ls.wi);
     let f = bsdf.eval(wo_local, wi_local);
     let facing = wi_local.z * wo_local.z > 0.0;
     // No shadow ray when neither the colour nor DIRECT_LIGHT can gain from it.
     if f.is_black() && !(want_incident && facing) {
-        return none;
+        return None;
     }
     let ray = spawn(scene, hit, ls.wi, time);
     let t_max = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) - scene.epsilon(hit.p) } else { f32::INFINITY };
-    *rays += 1;
-    if t_max <= 0.0 || scene.occluded(&ray, t_max) {
-        return none;
-    }
     let cos = wi_local.z.abs();
     let light_pdf = choose_pdf * ls.pdf;
     let w = power_heuristic(light_pdf, bsdf.pdf(wo_local, wi_local));
-    LightContribution {
+    let contribution = LightContribution {
         reflected: f * cos * ls.radiance * (w / light_pdf),
         // Light from behind the surface as the viewer sees it is not incident on the visible side.
         incident: if facing { ls.radiance * (cos / (light_pdf * std::f32::consts::PI)) } else { Vec3::ZERO },
         wi_local,
-    }
+    };
+    Some((Segment { ray, t_max }, contribution))
 }

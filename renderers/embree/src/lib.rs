@@ -7,7 +7,8 @@
 //! - [`scene`]: camera, shapes, textures, materials, lights, and the BVH.
 //! - [`bsdf`]: the scattering models, in the local shading frame.
 //! - [`integrator`]: path tracing with NEE, MIS and Russian roulette, and
-//!   every feature of the sample layout.
+//!   every feature of the sample layout; paths are traced in batches whose
+//!   rays go to Embree together (wavefront style).
 //! - [`render`]: the protocol's tiles, and in-process rendering.
 //! - [`embree`]: the thin layer over Embree.
 //!

@@ -2,7 +2,7 @@
 //! technique did not give, tracing paths, writing the layout's elements;
 //! and in-process rendering for references and benchmarks.
 
-use crate::integrator::{trace, Position, SampleValues, Wanted};
+use crate::integrator::{Batch, Position, SampleValues, Wanted};
 use crate::scene::Scene;
 use fbksd_core::layout::{Element, ElementIo};
 use fbksd_core::{CompiledLayout, Feature, Tile};
@@ -164,6 +164,10 @@ fn position(p: &[f64; 7]) -> Position {
     }
 }
 
+/// Paths traced together: enough that the later bounces, after Russian
+/// roulette, still hand Embree streams worth batching.
+const BATCH: usize = 256;
+
 /// Fills `samples` (each `layout.sample_size()` floats) at `places`; returns rays traced.
 pub fn fill(
     scene: &Scene,
@@ -181,23 +185,32 @@ pub fn fill(
     });
     let mut drawer = Drawer { sampler, needed: scene.used_parameters() | outputs, strata: Strata::new(1), pixel: None };
     let mut rays = 0u64;
-    for (sample, place) in samples.chunks_exact_mut(size).zip(places) {
-        let (mut p, dims) = drawer.draw(place);
-        for (d, input) in bindings.inputs.iter().enumerate() {
-            if let Some(i) = input {
-                p[d] = sample[*i] as f64;
+    let mut batch = Batch::default();
+    let mut places = places.into_iter();
+    let mut drawn: Vec<([f64; 7], Dimensions)> = Vec::with_capacity(BATCH);
+    for chunk in samples.chunks_mut(size * BATCH) {
+        drawn.clear();
+        for (sample, place) in chunk.chunks_exact(size).zip(&mut places) {
+            let (mut p, dims) = drawer.draw(place);
+            for (d, input) in bindings.inputs.iter().enumerate() {
+                if let Some(i) = input {
+                    p[d] = sample[*i] as f64;
+                }
             }
+            drawn.push((p, dims));
         }
-        let values = trace(scene, &position(&p), &dims, &bindings.wanted);
-        rays += values.rays as u64;
-        if values.repaired {
-            repairs.0.fetch_add(1, Ordering::Relaxed);
-        }
-        for (slot, source) in sample.iter_mut().zip(&bindings.outputs) {
-            match source {
-                None => {}
-                Some(Source::Parameter(d)) => *slot = p[*d] as f32,
-                Some(Source::Feature(f, n)) => *slot = feature(&values, *f, *n),
+        let traced = batch.trace(scene, drawn.iter().map(|(p, dims)| (position(p), *dims)), &bindings.wanted);
+        for ((sample, (p, _)), values) in chunk.chunks_exact_mut(size).zip(&drawn).zip(traced) {
+            rays += values.rays as u64;
+            if values.repaired {
+                repairs.0.fetch_add(1, Ordering::Relaxed);
+            }
+            for (slot, source) in sample.iter_mut().zip(&bindings.outputs) {
+                match source {
+                    None => {}
+                    Some(Source::Parameter(d)) => *slot = p[*d] as f32,
+                    Some(Source::Feature(f, n)) => *slot = feature(&values, *f, *n),
+                }
             }
         }
     }
@@ -284,21 +297,43 @@ fn pixel_means(
     let mut rgb = vec![0f32; w * h * 3];
     rgb.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         let strata = Strata::new(spp);
+        let mut batch = Batch::default();
+        let mut drawn = [[0f64; 7]; BATCH];
+        // The paths of a batch, and the column of each (a batch spans pixels when spp is low).
+        let mut starts: Vec<(Position, Dimensions)> = Vec::with_capacity(BATCH);
+        let mut columns: Vec<usize> = Vec::with_capacity(BATCH);
+        let mut sums = vec![[0f64; 3]; w];
         let mut row_rays = 0u64;
-        for x in 0..w {
-            let pixel = sampler.pixel(x as u32, y as u32);
-            let mut sum = [0f64; 3];
-            for s in 0..spp {
-                let p = sampler.pixel_sample(&pixel, &strata, s, needed);
-                let v = trace(scene, &position(&p), &Dimensions::of_pixel_sample(&pixel, s), wanted);
+        let mut flush = |starts: &mut Vec<(Position, Dimensions)>, columns: &mut Vec<usize>| {
+            for (&x, v) in columns.iter().zip(batch.trace(scene, starts.drain(..), wanted)) {
                 row_rays += v.rays as u64;
                 if v.repaired {
                     repairs.0.fetch_add(1, Ordering::Relaxed);
                 }
-                for (total, value) in sum.iter_mut().zip(values(&v)) {
+                for (total, value) in sums[x].iter_mut().zip(values(&v)) {
                     *total += value as f64;
                 }
             }
+            columns.clear();
+        };
+        for x in 0..w {
+            let pixel = sampler.pixel(x as u32, y as u32);
+            let mut s0 = 0;
+            while s0 < spp {
+                let n = (spp - s0).min((BATCH - starts.len()) as u64) as usize;
+                sampler.pixel_samples(&pixel, &strata, s0, needed, &mut drawn[..n]);
+                for (k, p) in drawn[..n].iter().enumerate() {
+                    starts.push((position(p), Dimensions::of_pixel_sample(&pixel, s0 + k as u64)));
+                    columns.push(x);
+                }
+                s0 += n as u64;
+                if starts.len() == BATCH {
+                    flush(&mut starts, &mut columns);
+                }
+            }
+        }
+        flush(&mut starts, &mut columns);
+        for (x, sum) in sums.iter().enumerate() {
             for c in 0..3 {
                 row[x * 3 + c] = (sum[c] / spp as f64) as f32;
             }

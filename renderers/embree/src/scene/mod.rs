@@ -7,13 +7,22 @@ pub mod material;
 pub mod shape;
 pub mod texture;
 
-use crate::embree::{Bvh, EmbreeError};
+use crate::embree::{Bvh, EmbreeError, Query};
+use crate::integrator::Segment;
 use crate::math::Vec3;
 use camera::{Camera, Ray};
 use fbksd_core::SceneInfo;
 use light::Light;
 use material::Material;
 use shape::{Shape, SurfaceHit};
+
+/// Embree's query records for [`Scene::intersect_all`] and
+/// [`Scene::occluded_all`], kept between batches.
+#[derive(Debug, Default)]
+pub struct QueryBuffers {
+    queries: Vec<Query>,
+    hits: Vec<Option<crate::embree::RayHit>>,
+}
 
 /// Everything the integrator needs.
 pub struct Scene {
@@ -134,19 +143,43 @@ impl Scene {
         scale * 2e-5 + f32::MIN_POSITIVE
     }
 
-    /// The closest surface along `ray`, up to `t_max`.
-    #[inline]
-    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<SurfaceHit> {
-        let time = self.embree_time(ray.time);
-        let hit = self.bvh.intersect(ray.origin.to_array(), ray.dir.to_array(), 0.0, t_max, time)?;
-        Some(self.shapes[hit.geometry as usize].geometry.surface(&hit, ray.origin, ray.dir, time, hit.geometry))
+    /// The closest surface along each ray (unbounded), in one batch to Embree.
+    pub fn intersect_all(&self, rays: &[Ray], buffers: &mut QueryBuffers, hits: &mut Vec<Option<SurfaceHit>>) {
+        let queries = &mut buffers.queries;
+        queries.clear();
+        queries.extend(rays.iter().map(|ray| Query {
+            org: ray.origin.to_array(),
+            dir: ray.dir.to_array(),
+            tnear: 0.0,
+            tfar: f32::INFINITY,
+            time: self.embree_time(ray.time),
+        }));
+        self.bvh.intersect_batch(queries, &mut buffers.hits);
+        hits.clear();
+        hits.extend(rays.iter().zip(queries.iter()).zip(&buffers.hits).map(|((ray, query), hit)| {
+            let hit = hit.as_ref()?;
+            Some(self.shapes[hit.geometry as usize].geometry.surface(
+                hit,
+                ray.origin,
+                ray.dir,
+                query.time,
+                hit.geometry,
+            ))
+        }));
     }
 
-    /// Whether anything lies between `ray.origin` and distance `t_max`.
-    #[inline]
-    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
-        let time = self.embree_time(ray.time);
-        self.bvh.occluded(ray.origin.to_array(), ray.dir.to_array(), 0.0, t_max, time)
+    /// Whether anything blocks each segment, in one batch to Embree.
+    pub fn occluded_all(&self, segments: &[Segment], buffers: &mut QueryBuffers, occluded: &mut Vec<bool>) {
+        let queries = &mut buffers.queries;
+        queries.clear();
+        queries.extend(segments.iter().map(|s| Query {
+            org: s.ray.origin.to_array(),
+            dir: s.ray.dir.to_array(),
+            tnear: 0.0,
+            tfar: s.t_max,
+            time: self.embree_time(s.ray.time),
+        }));
+        self.bvh.occluded_batch(queries, occluded);
     }
 
     /// Picks a light with `u` ∈ [0, 1): (index, probability).
