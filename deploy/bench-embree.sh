@@ -19,8 +19,12 @@ trap 'rm -rf "$out"' EXIT
 cornell=scenes/production/cornell-box/scene.pbrt
 ./target/release/fbksd-embree export-mitsuba "$cornell" "$out/mitsuba-scene"
 echo "== Cornell box, 512×512, 64 spp =="
-./target/release/fbksd-embree bench "$cornell" --spp 64 --out-dir "$out/ours"
-python3 renderers/embree/bench/mitsuba_bench.py "$out/mitsuba-scene" 64 "$out/mitsuba.exr"
+./target/release/fbksd-embree bench "$cornell" --spp 64 --out-dir "$out/ours" | tee "$out/ours.txt"
+python3 renderers/embree/bench/mitsuba_bench.py "$out/mitsuba-scene" 64 "$out/mitsuba.exr" | tee "$out/mitsuba.txt"
+# The all-cores figure is the last "M samples/s" of each line.
+all_cores() { grep -o '[0-9.]* M samples/s' "$1" | tail -n 1 | cut -d' ' -f1; }
+python3 -c "import sys; print(f'ours / Mitsuba on all cores: {float(sys.argv[1]) / float(sys.argv[2]):.2f}x')" \
+    "$(all_cores "$out/ours.txt")" "$(all_cores "$out/mitsuba.txt")"
 echo "== Hair, 512×512, 16 spp =="
 ./target/release/fbksd-embree bench scenes/production/hair/scene.pbrt --spp 16
 echo "== Agreement of the two Cornell images (each 64 spp) =="
