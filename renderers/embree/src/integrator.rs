@@ -488,7 +488,8 @@ fn sample_light(
     let t_max = if ls.distance.is_finite() { ls.distance * (1.0 - 1e-4) - scene.epsilon(hit.p) } else { f32::INFINITY };
     let cos = wi_local.z.abs();
     let light_pdf = choose_pdf * ls.pdf;
-    let w = power_heuristic(light_pdf, bsdf.pdf(wo_local, wi_local));
+    // A delta light cannot be found by a BSDF sample: its sample takes all the weight.
+    let w = if light.is_delta() { 1.0 } else { power_heuristic(light_pdf, bsdf.pdf(wo_local, wi_local)) };
     let contribution = LightContribution {
         reflected: f * cos * ls.radiance * (w / light_pdf),
         // Light from behind the surface as the viewer sees it is not incident on the visible side.

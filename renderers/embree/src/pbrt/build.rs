@@ -213,6 +213,88 @@ impl Parser {
         })
     }
 
+    /// A `LightSource`, placed by the current transform.
+    pub(super) fn light(&self, ty: &str, params: &ParamSet, loc: &Loc) -> Result<Light, SceneError> {
+        let [t0, t1] = self.state.ctm;
+        if t0 != t1 && ty != "infinite" {
+            return Err(SceneError::at(loc, "a moving light is not supported"));
+        }
+        // An RGB spectrum, or pbrt's default: the colour space's illuminant, white in RGB.
+        let rgb = |name: &str| -> Result<Vec3, SceneError> {
+            match params.spectrum(name)? {
+                None => Ok(Vec3::ONE),
+                Some(SpectrumValue::Rgb(v)) => Ok(v),
+                Some(SpectrumValue::Texture(_)) => Err(params.invalid(name, "cannot be a texture")),
+            }
+        };
+        let point = |name: &str, default: Vec3| -> Result<Vec3, SceneError> {
+            match params.triples(name, &["point3", "point"])?.as_deref() {
+                None => Ok(default),
+                Some([p]) => Ok(*p),
+                Some(_) => Err(params.invalid(name, "takes one point")),
+            }
+        };
+        let scale = params.float("scale", 1.0)?;
+        // pbrt-v4's "power" (and "illuminance") set the light's photometric
+        // power for a white light; an RGB colour then multiplies it, as in pbrt.
+        let target = |name: &str, per_unit: f32| -> Result<f32, SceneError> {
+            let v = params.float(name, -1.0)?;
+            Ok(if v > 0.0 { v / per_unit } else { 1.0 })
+        };
+        let from = || point("from", Vec3::ZERO);
+        let to = || point("to", Vec3 { x: 0.0, y: 0.0, z: 1.0 });
+        Ok(match ty {
+            "infinite" => {
+                if params.string("filename")?.is_some() {
+                    return Err(params.invalid(
+                        "filename",
+                        "is not supported: environment maps are not implemented; give a constant \"rgb L\"",
+                    ));
+                }
+                Light::Environment { radiance: rgb("L")? * scale }
+            }
+            "point" => {
+                let intensity = rgb("I")? * scale * target("power", 4.0 * std::f32::consts::PI)?;
+                Light::Point { position: t0.point(from()?), intensity }
+            }
+            "spot" => {
+                let cone = params.float("coneangle", 30.0)?;
+                let delta = params.float("conedeltaangle", 5.0)?;
+                if !(cone > 0.0 && cone <= 180.0) || !(0.0..=cone).contains(&delta) {
+                    return Err(params
+                        .invalid("coneangle", "must be in (0, 180] degrees, with conedeltaangle between 0 and it"));
+                }
+                let cos_falloff_end = cone.to_radians().cos();
+                let cos_falloff_start = (cone - delta).to_radians().cos();
+                let (from, to) = (from()?, to()?);
+                let axis = t0.vector(to - from).normalize();
+                if axis == Vec3::ZERO {
+                    return Err(params.invalid("to", "must differ from \"from\""));
+                }
+                let solid_angle = 2.0
+                    * std::f32::consts::PI
+                    * ((1.0 - cos_falloff_start) + (cos_falloff_start - cos_falloff_end) / 2.0);
+                let intensity = rgb("I")? * scale * target("power", solid_angle)?;
+                Light::Spot { position: t0.point(from), axis, intensity, cos_falloff_start, cos_falloff_end }
+            }
+            "distant" => {
+                let direction = t0.vector(from()? - to()?).normalize();
+                if direction == Vec3::ZERO {
+                    return Err(params.invalid("to", "must differ from \"from\""));
+                }
+                Light::Distant { direction, radiance: rgb("L")? * scale * target("illuminance", 1.0)? }
+            }
+            other => {
+                return Err(SceneError::at(
+                    loc,
+                    format!(
+                        "unsupported light {other:?} (supported: infinite, point, spot, distant, and AreaLightSource)"
+                    ),
+                ))
+            }
+        })
+    }
+
     pub(super) fn shape(&mut self, ty: &str, params: &ParamSet, loc: &Loc) -> Result<(), SceneError> {
         let [t0, t1] = self.state.ctm;
         let moving = t0 != t1;

@@ -17,8 +17,8 @@
 //! `constant`, `scale`); `Material`, `MakeNamedMaterial`, `NamedMaterial`
 //! (`diffuse`, `conductor`, `dielectric`, `coateddiffuse`); `Shape`
 //! (`trianglemesh`, `plymesh`, `sphere`, `curve`); `AreaLightSource
-//! "diffuse"`; `LightSource "infinite"` (constant). Anything else is an
-//! error naming the file and line.
+//! "diffuse"`; `LightSource` `"infinite"` (constant), `"point"`, `"spot"`,
+//! `"distant"`. Anything else is an error naming the file and line.
 
 mod build;
 pub mod lexer;

@@ -487,29 +487,14 @@ impl Parser {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a light type", loc)?;
                 let params = c.params(format!("LightSource {ty:?}"), loc)?;
-                if ty != "infinite" {
-                    return Err(SceneError::at(
-                        loc,
-                        format!("unsupported light {ty:?} (supported: infinite, and AreaLightSource)"),
-                    ));
-                }
-                if params.string("filename")?.is_some() {
-                    return Err(params.invalid(
-                        "filename",
-                        "is not supported: environment maps are not implemented; give a constant \"rgb L\"",
-                    ));
-                }
-                let radiance = match params.spectrum("L")? {
-                    None => Vec3::ONE,
-                    Some(SpectrumValue::Rgb(v)) => v,
-                    Some(SpectrumValue::Texture(_)) => return Err(params.invalid("L", "cannot be a texture")),
-                };
-                let scale = params.float("scale", 1.0)?;
+                let light = self.light(&ty, &params, loc)?;
                 params.check_unused()?;
-                if self.lights.iter().any(|l| matches!(l, Light::Environment { .. })) {
+                if matches!(light, Light::Environment { .. })
+                    && self.lights.iter().any(|l| matches!(l, Light::Environment { .. }))
+                {
                     return Err(SceneError::at(loc, "a second infinite light (only one is supported)"));
                 }
-                self.lights.push(Light::Environment { radiance: radiance * scale });
+                self.lights.push(light);
             }
             "Shape" => {
                 self.need_world(loc, name, true)?;

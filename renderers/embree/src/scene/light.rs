@@ -1,7 +1,9 @@
-//! Lights: diffuse area lights on triangle meshes and spheres, and a
-//! constant environment. Each samples a point (or direction) as seen from
-//! a receiving point and reports the density in solid angle, for next-event
-//! estimation with multiple importance sampling.
+//! Lights: diffuse area lights on triangle meshes and spheres, a constant
+//! environment, and the delta lights (point, spot, distant). Each samples
+//! a point (or direction) as seen from a receiving point and reports the
+//! density in solid angle, for next-event estimation with multiple
+//! importance sampling; a delta light's one direction has density 1 and
+//! cannot be found by a BSDF sample.
 
 use crate::math::{vec3, Frame, Vec3};
 use crate::scene::shape::triangle_area;
@@ -43,6 +45,34 @@ pub enum Light {
     /// Constant radiance from every direction.
     Environment {
         /// The radiance.
+        radiance: Vec3,
+    },
+    /// Light from one point, the same in every direction (pbrt's `point`).
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Radiant intensity (per steradian).
+        intensity: Vec3,
+    },
+    /// A point light limited to a cone, with a smooth fall-off towards its
+    /// edge (pbrt's `spot`).
+    Spot {
+        /// Position.
+        position: Vec3,
+        /// Unit axis of the cone, away from the light.
+        axis: Vec3,
+        /// Radiant intensity on the axis.
+        intensity: Vec3,
+        /// Cosine of the angle where the fall-off begins.
+        cos_falloff_start: f32,
+        /// Cosine of the cone's half-angle: nothing beyond it.
+        cos_falloff_end: f32,
+    },
+    /// Parallel light from one direction, as from the sun (pbrt's `distant`).
+    Distant {
+        /// Unit direction towards the light.
+        direction: Vec3,
+        /// Radiance: the irradiance on a surface facing the light.
         radiance: Vec3,
     },
 }
@@ -99,7 +129,22 @@ pub struct LightSample {
     pub pdf: f32,
 }
 
+/// pbrt's smooth step: 0 below `a`, 1 above `b`, a cubic between.
+fn smooth_step(a: f32, b: f32, x: f32) -> f32 {
+    if a == b {
+        return if x < a { 0.0 } else { 1.0 };
+    }
+    let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
 impl Light {
+    /// Whether the light is a delta light: reached only by light sampling.
+    #[inline]
+    pub fn is_delta(&self) -> bool {
+        matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Distant { .. })
+    }
+
     /// Emitted radiance leaving a point with normal `n` towards `w`.
     #[inline]
     pub fn emitted(&self, n: Vec3, w: Vec3) -> Vec3 {
@@ -112,6 +157,7 @@ impl Light {
                 }
             }
             Light::Environment { radiance } => *radiance,
+            Light::Point { .. } | Light::Spot { .. } | Light::Distant { .. } => Vec3::ZERO,
         }
     }
 
@@ -122,6 +168,14 @@ impl Light {
                 radiance.average() * area * PI * if *two_sided { 2.0 } else { 1.0 }
             }
             Light::Environment { radiance } => radiance.average() * PI * PI * scene_radius * scene_radius * 4.0,
+            Light::Point { intensity, .. } => 4.0 * PI * intensity.average(),
+            Light::Spot { intensity, cos_falloff_start, cos_falloff_end, .. } => {
+                intensity.average()
+                    * 2.0
+                    * PI
+                    * ((1.0 - cos_falloff_start) + (cos_falloff_start - cos_falloff_end) / 2.0)
+            }
+            Light::Distant { radiance, .. } => radiance.average() * PI * scene_radius * scene_radius,
         }
     }
 
@@ -194,7 +248,27 @@ impl Light {
                 let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
                 (pdf.is_finite() && distance > 0.0).then_some(LightSample { wi, distance, radiance, pdf })
             }
+            Light::Point { position, intensity } => {
+                let (wi, distance) = Self::towards(p, *position)?;
+                Some(LightSample { wi, distance, radiance: *intensity / (distance * distance), pdf: 1.0 })
+            }
+            Light::Spot { position, axis, intensity, cos_falloff_start, cos_falloff_end } => {
+                let (wi, distance) = Self::towards(p, *position)?;
+                let falloff = smooth_step(*cos_falloff_end, *cos_falloff_start, axis.dot(-wi));
+                let radiance = *intensity * (falloff / (distance * distance));
+                Some(LightSample { wi, distance, radiance, pdf: 1.0 })
+            }
+            Light::Distant { direction, radiance } => {
+                Some(LightSample { wi: *direction, distance: f32::INFINITY, radiance: *radiance, pdf: 1.0 })
+            }
         }
+    }
+
+    /// The unit direction and distance from `p` to `to`, unless they coincide.
+    fn towards(p: Vec3, to: Vec3) -> Option<(Vec3, f32)> {
+        let d = to - p;
+        let distance = d.length();
+        (distance > 0.0 && distance.is_finite()).then(|| (d / distance, distance))
     }
 
     fn area_sample(&self, p: Vec3, point: Vec3, n: Vec3, pdf_area: f32) -> Option<LightSample> {
@@ -240,6 +314,8 @@ impl Light {
                     if sin2_max < 0.000_685_23 { sin2_max / 2.0 } else { 1.0 - (1.0 - sin2_max).max(0.0).sqrt() };
                 1.0 / (2.0 * PI * one_minus_cos_max)
             }
+            // A BSDF sample never finds a delta light.
+            Light::Point { .. } | Light::Spot { .. } | Light::Distant { .. } => 0.0,
         }
     }
 }
