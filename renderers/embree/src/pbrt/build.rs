@@ -260,7 +260,7 @@ impl Parser {
             "spot" => {
                 let cone = params.float("coneangle", 30.0)?;
                 let delta = params.float("conedeltaangle", 5.0)?;
-                if !(cone > 0.0 && cone <= 180.0) || !(0.0..=cone).contains(&delta) {
+                if !(cone > 0.0 && cone <= 180.0 && (0.0..=cone).contains(&delta)) {
                     return Err(params
                         .invalid("coneangle", "must be in (0, 180] degrees, with conedeltaangle between 0 and it"));
                 }
