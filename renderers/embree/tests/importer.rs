@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::scene;
+use common::{scene, scene_with_warnings};
 use fbksd_embree::scene::light::Light;
 use fbksd_embree::scene::material::Material;
 use fbksd_embree::scene::shape::Geometry;
@@ -241,7 +241,7 @@ fn every_error_names_the_file_line_and_problem() {
         "moving area light",
     );
     error_at("AreaLightSource \"spot\"\n", 1, "unsupported area light");
-    error_at("LightSource \"point\"\n", 1, "unsupported light \"point\"");
+    error_at("LightSource \"goniometric\"\n", 1, "unsupported light \"goniometric\"");
     error_at("LightSource \"infinite\" \"string filename\" \"sky.exr\"\n", 1, "environment maps are not implemented");
     error_at("ActiveTransform Sometimes\n", 1, "StartTime, EndTime or All");
     error_at("\"float x\" 1\n", 1, "expected a directive");
@@ -254,10 +254,16 @@ fn errors_in_options_and_structure_name_their_place_too() {
     assert!(whole(CAMERA).contains("no WorldBegin"));
     let e = whole(&format!("{CAMERA}WorldBegin\nAttributeBegin\n"));
     assert!(e.contains("scene.pbrt:5:") && e.contains("without a matching AttributeEnd"), "{e}");
-    let e = whole(&format!("PixelFilter \"gaussian\"\n{CAMERA}WorldBegin\n"));
-    assert!(e.contains("scene.pbrt:1:") && e.contains("use \"box\""), "{e}");
-    let e = whole(&format!("Integrator \"bdpt\"\n{CAMERA}WorldBegin\n"));
-    assert!(e.contains("unsupported integrator \"bdpt\""), "{e}");
+    // Another filter or integrator is a hint: the scene loads, with a warning naming the line.
+    let (_, w) =
+        scene_with_warnings(&format!("PixelFilter \"gaussian\" \"float sigma\" 0.5\n{CAMERA}WorldBegin\n")).unwrap();
+    assert!(w.len() == 1 && w[0].contains("scene.pbrt:1:") && w[0].contains("\"gaussian\" ignored"), "{w:?}");
+    let (_, w) = scene_with_warnings(&format!(
+        "Integrator \"bdpt\" \"integer maxdepth\" 3 \"bool visualizestrategies\" false\n{CAMERA}WorldBegin\n"
+    ))
+    .unwrap();
+    assert!(w.iter().any(|w| w.contains("scene.pbrt:1:") && w.contains("\"bdpt\" is a hint")), "{w:?}");
+    assert!(w.iter().any(|w| w.contains("\"bool visualizestrategies\" ignored")), "{w:?}");
     let e = whole(&format!("Integrator \"path\" \"integer maxdepht\" 5\n{CAMERA}WorldBegin\n"));
     assert!(e.contains("scene.pbrt:1:") && e.contains("unused parameter \"integer maxdepht\""), "{e}");
     let e = whole("LookAt 0 0 0 0 0 1 0 1 0\nCamera \"orthographic\"\nWorldBegin\n");

@@ -479,7 +479,8 @@ impl Parser {
         Ok(())
     }
 
-    pub(super) fn finish(self, path: &Path) -> Result<Scene, SceneError> {
+    /// The scene, and the warnings of the whole load.
+    pub(super) fn finish(self, path: &Path) -> Result<(Scene, Vec<SceneError>), SceneError> {
         let loc = Loc { file: Arc::from(path), line: 1 };
         let (width, height) = match &self.options.film {
             Some(film) => {
@@ -498,6 +499,21 @@ impl Parser {
                 let d = p.int("maxdepth", 5)?;
                 if p.bool("regularize", false)? {
                     return Err(p.invalid("regularize", "is not supported"));
+                }
+                // Settings of pbrt's own path tracers (light sampler, roulette) are hints;
+                // another integrator's settings are all hints.
+                let path = p.owner.ends_with("\"path\"") || p.owner.ends_with("\"volpath\"");
+                let ignored: Vec<String> = if path {
+                    ["lightsampler", "lightsamplestrategy", "rrthreshold", "pixelbounds"]
+                        .iter()
+                        .filter(|name| p.ignore(name))
+                        .map(|name| format!("{name:?}"))
+                        .collect()
+                } else {
+                    p.ignore_all()
+                };
+                if !ignored.is_empty() {
+                    self.warn(&p.loc, format!("{} ignored for {}", ignored.join(", "), p.owner));
                 }
                 p.check_unused()?;
                 if !(0..=10_000).contains(&d) {
@@ -549,7 +565,10 @@ impl Parser {
             Some(dir) if stem == "scene" || stem == "small" => dir,
             _ => stem,
         };
-        Scene::build(name, camera, max_depth, self.shapes, self.materials, self.lights, self.transform_times)
-            .map_err(|e| SceneError { loc: None, message: e.to_string() })
+        let warnings = self.warnings.take();
+        let scene =
+            Scene::build(name, camera, max_depth, self.shapes, self.materials, self.lights, self.transform_times)
+                .map_err(|e| SceneError { loc: None, message: e.to_string() })?;
+        Ok((scene, warnings))
     }
 }

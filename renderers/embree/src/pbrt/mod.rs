@@ -66,7 +66,36 @@ impl fmt::Display for SceneError {
 
 impl std::error::Error for SceneError {}
 
-/// Loads a pbrt-v4 scene file into a renderable scene.
+/// Loads a pbrt-v4 scene file into a renderable scene. Constructs read
+/// with a conversion (pbrt-v3 forms, hints this renderer ignores) are
+/// printed to standard error, once per kind with how many more there were.
 pub fn load(path: &Path) -> Result<crate::scene::Scene, SceneError> {
+    let (scene, warnings) = load_with_warnings(path)?;
+    for line in summarize(&warnings) {
+        eprintln!("warning: {line}");
+    }
+    Ok(scene)
+}
+
+/// [`load`], returning the warnings (in file order) instead of printing them.
+pub fn load_with_warnings(path: &Path) -> Result<(crate::scene::Scene, Vec<SceneError>), SceneError> {
     parser::load(path)
+}
+
+/// One line per kind of warning: the first place, and how many more.
+pub fn summarize(warnings: &[SceneError]) -> Vec<String> {
+    let mut kinds: Vec<(&str, &SceneError, usize)> = Vec::new();
+    for w in warnings {
+        match kinds.iter_mut().find(|(m, _, _)| *m == w.message) {
+            Some(kind) => kind.2 += 1,
+            None => kinds.push((&w.message, w, 0)),
+        }
+    }
+    kinds
+        .into_iter()
+        .map(|(_, first, more)| match more {
+            0 => first.to_string(),
+            n => format!("{first} (and {n} more like it)"),
+        })
+        .collect()
 }

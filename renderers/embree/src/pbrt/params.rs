@@ -30,10 +30,16 @@ pub struct Param {
     used: Cell<bool>,
 }
 
+/// pbrt-v3 parameter types, and the pbrt-v4 types they are read as.
+const V3_TYPES: &[(&str, &str)] =
+    &[("color", "rgb"), ("point", "point3"), ("normal", "normal3"), ("vector", "vector3")];
+
 /// The parameters of one directive, and what they belong to (for messages).
 #[derive(Debug, Clone)]
 pub struct ParamSet {
     params: Vec<Param>,
+    /// pbrt-v3 constructs read the pbrt-v4 way, for warnings.
+    pub upgrades: Vec<(Loc, String)>,
     /// E.g. `Shape "sphere"`.
     pub owner: String,
     /// Where the directive is.
@@ -47,10 +53,7 @@ const TYPES: &[&str] = &[
     "vector2",
     "point3",
     "vector3",
-    "normal",
     "normal3",
-    "point",
-    "vector",
     "rgb",
     "spectrum",
     "blackbody",
@@ -71,7 +74,7 @@ pub enum SpectrumValue {
 impl ParamSet {
     /// An empty set.
     pub fn new(owner: String, loc: Loc) -> ParamSet {
-        ParamSet { params: Vec::new(), owner, loc }
+        ParamSet { params: Vec::new(), upgrades: Vec::new(), owner, loc }
     }
 
     /// Adds a parameter; rejects unknown types and duplicates.
@@ -80,9 +83,14 @@ impl ParamSet {
         let (Some(ty), Some(name), None) = (words.next(), words.next(), words.next()) else {
             return Err(SceneError::at(&loc, format!("parameter declaration {decl:?} should be \"type name\"")));
         };
-        if !TYPES.contains(&ty) {
-            return Err(SceneError::at(&loc, format!("unknown parameter type {ty:?} in {decl:?}")));
-        }
+        let ty = match V3_TYPES.iter().find(|(v3, _)| *v3 == ty) {
+            Some((v3, v4)) => {
+                self.upgrades.push((loc.clone(), format!("pbrt-v3 parameter type \"{v3}\" read as \"{v4}\"")));
+                *v4
+            }
+            None if TYPES.contains(&ty) => ty,
+            None => return Err(SceneError::at(&loc, format!("unknown parameter type {ty:?} in {decl:?}"))),
+        };
         if self.params.iter().any(|p| p.name == name) {
             return Err(SceneError::at(&loc, format!("parameter {name:?} given twice for {}", self.owner)));
         }
@@ -98,6 +106,56 @@ impl ParamSet {
         }
         self.params.push(Param { ty: ty.into(), name: name.into(), values, loc, used: Cell::new(false) });
         Ok(())
+    }
+
+    /// Whether `name` is given.
+    pub fn has(&self, name: &str) -> bool {
+        self.params.iter().any(|p| p.name == name)
+    }
+
+    /// Renames parameter `from` to `to` (a pbrt-v3 name to pbrt-v4's);
+    /// whether it was there.
+    pub fn rename(&mut self, from: &str, to: &str) -> bool {
+        if self.has(to) {
+            return false;
+        }
+        match self.params.iter_mut().find(|p| p.name == from) {
+            Some(p) => {
+                p.name = to.into();
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Gives parameter `name` of type `ty` these values unless it is given
+    /// (a pbrt-v3 default that pbrt-v4 changed).
+    pub fn default_to(&mut self, ty: &str, name: &str, values: Values) {
+        if !self.has(name) {
+            let loc = self.loc.clone();
+            self.params.push(Param { ty: ty.into(), name: name.into(), values, loc, used: Cell::new(false) });
+        }
+    }
+
+    /// Marks `name` as read without reading it (a hint this renderer has
+    /// no use for); whether it was given.
+    pub fn ignore(&self, name: &str) -> bool {
+        self.find(name).is_some()
+    }
+
+    /// Marks every parameter as read (a directive whose parameters are all hints).
+    pub fn ignore_all(&self) -> Vec<String> {
+        self.params.iter().filter(|p| !p.used.replace(true)).map(|p| format!("\"{} {}\"", p.ty, p.name)).collect()
+    }
+
+    /// The value of a constant numeric or RGB parameter, if it has one
+    /// value or three equal ones (for checking a v3 default).
+    pub fn constant(&self, name: &str) -> Option<f64> {
+        let p = self.params.iter().find(|p| p.name == name)?;
+        match &p.values {
+            Values::Nums(v) if v.len() == 1 || (v.len() == 3 && v[0] == v[1] && v[1] == v[2]) => Some(v[0]),
+            _ => None,
+        }
     }
 
     fn find(&self, name: &str) -> Option<&Param> {

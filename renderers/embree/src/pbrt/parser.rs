@@ -63,6 +63,8 @@ pub(super) struct Parser {
     pub(super) shapes: Vec<Shape>,
     pub(super) lights: Vec<Light>,
     include_depth: u32,
+    /// Constructs read with a conversion (pbrt-v3 forms, ignored hints), in file order.
+    pub(super) warnings: std::cell::RefCell<Vec<SceneError>>,
 }
 
 /// Reads tokens one at a time.
@@ -159,8 +161,9 @@ impl Cursor {
     }
 }
 
-/// Parses `path` and everything it includes, and builds the scene.
-pub fn load(path: &Path) -> Result<Scene, SceneError> {
+/// Parses `path` and everything it includes, and builds the scene; also
+/// returns a warning for each construct read with a conversion.
+pub fn load(path: &Path) -> Result<(Scene, Vec<SceneError>), SceneError> {
     let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut parser = Parser {
         base,
@@ -184,6 +187,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         shapes: Vec::new(),
         lights: Vec::new(),
         include_depth: 0,
+        warnings: Default::default(),
     };
     parser.file(path, None)?;
     let end = Loc { file: Arc::from(path), line: 0 };
@@ -197,6 +201,20 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 }
 
 impl Parser {
+    /// Notes a construct read with a conversion.
+    pub(super) fn warn(&self, loc: &Loc, message: impl Into<String>) {
+        self.warnings.borrow_mut().push(SceneError::at(loc, message));
+    }
+
+    /// A directive's parameter list; warns of the pbrt-v3 parameter types it was read with.
+    fn params(&self, c: &mut Cursor, owner: String, at: &Loc) -> Result<ParamSet, SceneError> {
+        let mut params = c.params(owner, at)?;
+        for (loc, message) in params.upgrades.drain(..) {
+            self.warn(&loc, message);
+        }
+        Ok(params)
+    }
+
     pub(super) fn resolve(&self, name: &str) -> PathBuf {
         let p = Path::new(name);
         if p.is_absolute() {
@@ -323,7 +341,7 @@ impl Parser {
             "Camera" => {
                 self.need_world(loc, name, false)?;
                 let ty = c.string("a camera type", loc)?;
-                let params = c.params(format!("Camera {ty:?}"), loc)?;
+                let params = self.params(c, format!("Camera {ty:?}"), loc)?;
                 if ty != "perspective" {
                     return Err(SceneError::at(loc, format!("unsupported camera {ty:?} (supported: perspective)")));
                 }
@@ -338,7 +356,7 @@ impl Parser {
             "Film" => {
                 self.need_world(loc, name, false)?;
                 let ty = c.string("a film type", loc)?;
-                let params = c.params(format!("Film {ty:?}"), loc)?;
+                let params = self.params(c, format!("Film {ty:?}"), loc)?;
                 if ty != "rgb" && ty != "gbuffer" {
                     return Err(SceneError::at(loc, format!("unsupported film {ty:?} (supported: rgb, gbuffer)")));
                 }
@@ -347,36 +365,32 @@ impl Parser {
             "Sampler" => {
                 self.need_world(loc, name, false)?;
                 let ty = c.string("a sampler type", loc)?;
-                let params = c.params(format!("Sampler {ty:?}"), loc)?;
-                // Samples come from the technique or our own sampler; the
-                // count is only a hint, kept for compatibility.
+                let params = self.params(c, format!("Sampler {ty:?}"), loc)?;
+                // Samples come from the technique or our own sampler: the
+                // sampler and its settings are hints, kept for compatibility.
                 params.int("pixelsamples", 16)?;
-                params.check_unused()?;
+                params.ignore_all();
             }
             "Integrator" => {
                 self.need_world(loc, name, false)?;
                 let ty = c.string("an integrator type", loc)?;
-                let params = c.params(format!("Integrator {ty:?}"), loc)?;
+                let params = self.params(c, format!("Integrator {ty:?}"), loc)?;
                 if ty != "path" && ty != "volpath" {
-                    return Err(SceneError::at(loc, format!("unsupported integrator {ty:?} (supported: path)")));
+                    self.warn(loc, format!("integrator {ty:?} is a hint: scenes are rendered by the path tracer"));
                 }
                 self.options.integrator = Some(params);
             }
             "PixelFilter" => {
                 self.need_world(loc, name, false)?;
                 let ty = c.string("a filter type", loc)?;
-                let params = c.params(format!("PixelFilter {ty:?}"), loc)?;
+                let params = self.params(c, format!("PixelFilter {ty:?}"), loc)?;
+                params.ignore_all();
                 if ty != "box" {
-                    return Err(SceneError::at(
+                    self.warn(
                         loc,
-                        format!("unsupported pixel filter {ty:?}: references are box filtered and techniques reconstruct the image; use \"box\""),
-                    ));
+                        format!("pixel filter {ty:?} ignored: references are box filtered, and techniques reconstruct the image"),
+                    );
                 }
-                let (x, y) = (params.float("xradius", 0.5)?, params.float("yradius", 0.5)?);
-                if x != 0.5 || y != 0.5 {
-                    return Err(params.invalid("xradius", "must be 0.5 (one pixel)"));
-                }
-                params.check_unused()?;
             }
             "ColorSpace" => {
                 let cs = c.string("a colour space", loc)?;
@@ -384,7 +398,12 @@ impl Parser {
                     return Err(SceneError::at(loc, format!("unsupported colour space {cs:?} (supported: srgb)")));
                 }
             }
-            "Option" => return Err(SceneError::at(loc, "Option is not supported")),
+            "Option" => {
+                // `Option "type name" value`: global settings of pbrt's own renderer.
+                let decl = c.string("an option", loc)?;
+                c.next();
+                self.warn(loc, format!("Option {decl:?} ignored (it sets pbrt's own renderer)"));
+            }
             "WorldBegin" => {
                 self.need_world(loc, name, false)?;
                 self.in_world = true;
@@ -421,7 +440,7 @@ impl Parser {
                 let tex_name = c.string("a texture name", loc)?;
                 let kind = c.string("\"spectrum\" or \"float\"", loc)?;
                 let class = c.string("a texture class", loc)?;
-                let params = c.params(format!("Texture {tex_name:?} ({class})"), loc)?;
+                let params = self.params(c, format!("Texture {tex_name:?} ({class})"), loc)?;
                 let float = match kind.as_str() {
                     "float" => true,
                     "spectrum" | "color" => false,
@@ -440,7 +459,7 @@ impl Parser {
             "Material" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a material type", loc)?;
-                let params = c.params(format!("Material {ty:?}"), loc)?;
+                let params = self.params(c, format!("Material {ty:?}"), loc)?;
                 let m = self.material(&ty, &params, loc)?;
                 params.check_unused()?;
                 self.materials.push(m);
@@ -449,7 +468,7 @@ impl Parser {
             "MakeNamedMaterial" => {
                 self.need_world(loc, name, true)?;
                 let material_name = c.string("a material name", loc)?;
-                let params = c.params(format!("MakeNamedMaterial {material_name:?}"), loc)?;
+                let params = self.params(c, format!("MakeNamedMaterial {material_name:?}"), loc)?;
                 let ty = params
                     .string("type")?
                     .ok_or_else(|| SceneError::at(loc, "MakeNamedMaterial needs \"string type\""))?;
@@ -469,7 +488,7 @@ impl Parser {
             "AreaLightSource" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a light type", loc)?;
-                let params = c.params(format!("AreaLightSource {ty:?}"), loc)?;
+                let params = self.params(c, format!("AreaLightSource {ty:?}"), loc)?;
                 if ty != "diffuse" {
                     return Err(SceneError::at(loc, format!("unsupported area light {ty:?} (supported: diffuse)")));
                 }
@@ -486,7 +505,7 @@ impl Parser {
             "LightSource" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a light type", loc)?;
-                let params = c.params(format!("LightSource {ty:?}"), loc)?;
+                let params = self.params(c, format!("LightSource {ty:?}"), loc)?;
                 let light = self.light(&ty, &params, loc)?;
                 params.check_unused()?;
                 if matches!(light, Light::Environment { .. })
@@ -499,7 +518,7 @@ impl Parser {
             "Shape" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a shape type", loc)?;
-                let params = c.params(format!("Shape {ty:?}"), loc)?;
+                let params = self.params(c, format!("Shape {ty:?}"), loc)?;
                 self.shape(&ty, &params, loc)?;
                 params.check_unused()?;
             }

@@ -20,6 +20,15 @@ pub fn scene(text: &str, files: &[(&str, &[u8])]) -> Result<Scene, String> {
     fbksd_embree::pbrt::load(&path).map_err(|e| e.to_string())
 }
 
+/// A scene from pbrt text, loaded, with the warnings of its load as text.
+pub fn scene_with_warnings(text: &str) -> Result<(Scene, Vec<String>), String> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.pbrt");
+    std::fs::write(&path, text).unwrap();
+    let (scene, warnings) = fbksd_embree::pbrt::load_with_warnings(&path).map_err(|e| e.to_string())?;
+    Ok((scene, warnings.iter().map(|w| w.to_string()).collect()))
+}
+
 /// The file name the error messages use for [`scene`]'s main file.
 pub fn main_file() -> PathBuf {
     PathBuf::from("scene.pbrt")
