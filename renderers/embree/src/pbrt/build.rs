@@ -115,11 +115,11 @@ impl Parser {
                     Some("black") => Wrap::Black,
                     Some(_) => return Err(params.invalid("wrap", "must be repeat, clamp or black")),
                 };
-                if let Some(f) = params.string("filter")? {
-                    if f != "bilinear" {
-                        return Err(params.invalid("filter", "must be \"bilinear\" (the only supported filter)"));
-                    }
+                // Filtering is a hint: image textures are looked up bilinearly.
+                if let Some(f) = params.string("filter")?.filter(|f| f != "bilinear") {
+                    self.warn(loc, format!("texture filter {f:?} read as \"bilinear\""));
                 }
+                params.ignore("maxanisotropy");
                 let mut image = read_image(&self.resolve(&file), encoding).map_err(|e| SceneError::at(loc, e))?;
                 if float {
                     for p in &mut image.pixels {
@@ -486,6 +486,17 @@ impl Parser {
             Some(film) => {
                 let (w, h) = (film.int("xresolution", 1280)?, film.int("yresolution", 720)?);
                 film.string("filename")?;
+                // The sensor's response and the output encoding are pbrt's own
+                // film; references are linear radiance.
+                let ignored: Vec<String> =
+                    ["sensor", "iso", "whitebalance", "maxcomponentvalue", "diagonal", "savefp16", "writefp16"]
+                        .iter()
+                        .filter(|name| film.ignore(name))
+                        .map(|name| format!("{name:?}"))
+                        .collect();
+                if !ignored.is_empty() {
+                    self.warn(&film.loc, format!("{} ignored for {}", ignored.join(", "), film.owner));
+                }
                 film.check_unused()?;
                 if !(1..=65536).contains(&w) || !(1..=65536).contains(&h) {
                     return Err(film.invalid("xresolution", "and yresolution must be between 1 and 65536"));

@@ -6,6 +6,7 @@
 //! - [`parser`]: directives and the graphics state they change.
 //! - `build`: the scene they build (shapes, materials, textures, camera).
 //! - [`ply`]: meshes for `plymesh`.
+//! - `upgrade`: pbrt-v3 forms read as pbrt-v4's `--upgrade` converts them.
 //!
 //! Supported: `Include`/`Import`; `LookAt`, `Translate`, `Scale`,
 //! `Rotate`, `Transform`, `ConcatTransform`, `Identity`,
@@ -25,6 +26,7 @@ pub mod lexer;
 pub mod params;
 pub mod parser;
 pub mod ply;
+mod upgrade;
 
 use std::fmt;
 use std::path::Path;

@@ -128,6 +128,23 @@ impl ParamSet {
         }
     }
 
+    /// Takes parameter `name` out of the list.
+    pub fn remove(&mut self, name: &str) -> Option<Param> {
+        let i = self.params.iter().position(|p| p.name == name)?;
+        Some(self.params.remove(i))
+    }
+
+    /// Sets parameter `name` to type `ty` and these values, replacing any.
+    pub fn set(&mut self, ty: &str, name: &str, values: Values) {
+        let loc = self.remove(name).map_or_else(|| self.loc.clone(), |p| p.loc);
+        self.params.push(Param { ty: ty.into(), name: name.into(), values, loc, used: Cell::new(false) });
+    }
+
+    /// Parameter `name` as written, without marking it read.
+    pub fn get(&self, name: &str) -> Option<&Param> {
+        self.params.iter().find(|p| p.name == name)
+    }
+
     /// Gives parameter `name` of type `ty` these values unless it is given
     /// (a pbrt-v3 default that pbrt-v4 changed).
     pub fn default_to(&mut self, ty: &str, name: &str, values: Values) {
@@ -330,8 +347,8 @@ impl ParamSet {
     }
 }
 
-/// RGB approximations of pbrt's named metal spectra (reflectance-weighted
-/// averages over the sRGB primaries' bands).
+/// RGB approximations of pbrt's named spectra: metals (reflectance-weighted
+/// averages over the sRGB primaries' bands) and glasses.
 const NAMED: &[(&str, [f32; 3])] = &[
     ("metal-Au-eta", [0.143, 0.374, 1.442]),
     ("metal-Au-k", [3.983, 2.385, 1.603]),
@@ -341,6 +358,23 @@ const NAMED: &[(&str, [f32; 3])] = &[
     ("metal-Cu-k", [3.912, 2.452, 2.142]),
     ("metal-Al-eta", [1.657, 0.880, 0.521]),
     ("metal-Al-k", [9.224, 6.270, 4.837]),
+    ("metal-CuZn-eta", [0.444, 0.527, 1.094]),
+    ("metal-CuZn-k", [3.695, 2.765, 1.829]),
+    // Magnesium oxide and titanium dioxide (rutile) barely absorb: their
+    // "k" is nearly zero.
+    ("metal-MgO-eta", [1.732, 1.738, 1.757]),
+    ("metal-MgO-k", [0.0, 0.0, 0.0]),
+    ("metal-TiO2-eta", [2.583, 2.652, 2.858]),
+    ("metal-TiO2-k", [0.0, 0.0, 0.0]),
+    // Glasses: the index at the helium d line (587.6 nm), the same in every
+    // channel; dispersion is not rendered.
+    ("glass-BK7", [1.5168, 1.5168, 1.5168]),
+    ("glass-BAF10", [1.6700, 1.6700, 1.6700]),
+    ("glass-FK51A", [1.4866, 1.4866, 1.4866]),
+    ("glass-LASF9", [1.8503, 1.8503, 1.8503]),
+    ("glass-F5", [1.6727, 1.6727, 1.6727]),
+    ("glass-F10", [1.7283, 1.7283, 1.7283]),
+    ("glass-F11", [1.7847, 1.7847, 1.7847]),
 ];
 
 fn named_spectrum(name: &str) -> Option<Vec3> {

@@ -161,6 +161,14 @@ impl Cursor {
     }
 }
 
+/// An error about a directive that was upgraded names what the file said.
+fn upgraded_from(mut e: SceneError, v3: &str, v4: &str) -> SceneError {
+    if v3 != v4 {
+        e.message += &format!(" (read from pbrt-v3's {v3:?})");
+    }
+    e
+}
+
 /// Parses `path` and everything it includes, and builds the scene; also
 /// returns a warning for each construct read with a conversion.
 pub fn load(path: &Path) -> Result<(Scene, Vec<SceneError>), SceneError> {
@@ -213,6 +221,14 @@ impl Parser {
             self.warn(&loc, message);
         }
         Ok(params)
+    }
+
+    /// The pbrt-v4 type of an upgraded directive; warns of each conversion.
+    fn upgraded(&self, up: super::upgrade::Upgraded, loc: &Loc) -> String {
+        for note in &up.notes {
+            self.warn(loc, note.clone());
+        }
+        up.ty
     }
 
     pub(super) fn resolve(&self, name: &str) -> PathBuf {
@@ -356,7 +372,8 @@ impl Parser {
             "Film" => {
                 self.need_world(loc, name, false)?;
                 let ty = c.string("a film type", loc)?;
-                let params = self.params(c, format!("Film {ty:?}"), loc)?;
+                let mut params = self.params(c, format!("Film {ty:?}"), loc)?;
+                let ty = self.upgraded(super::upgrade::film(&ty, &mut params), loc);
                 if ty != "rgb" && ty != "gbuffer" {
                     return Err(SceneError::at(loc, format!("unsupported film {ty:?} (supported: rgb, gbuffer)")));
                 }
@@ -374,7 +391,8 @@ impl Parser {
             "Integrator" => {
                 self.need_world(loc, name, false)?;
                 let ty = c.string("an integrator type", loc)?;
-                let params = self.params(c, format!("Integrator {ty:?}"), loc)?;
+                let mut params = self.params(c, format!("Integrator {ty:?}"), loc)?;
+                let ty = self.upgraded(super::upgrade::integrator(&ty, &mut params), loc);
                 if ty != "path" && ty != "volpath" {
                     self.warn(loc, format!("integrator {ty:?} is a hint: scenes are rendered by the path tracer"));
                 }
@@ -440,7 +458,8 @@ impl Parser {
                 let tex_name = c.string("a texture name", loc)?;
                 let kind = c.string("\"spectrum\" or \"float\"", loc)?;
                 let class = c.string("a texture class", loc)?;
-                let params = self.params(c, format!("Texture {tex_name:?} ({class})"), loc)?;
+                let mut params = self.params(c, format!("Texture {tex_name:?} ({class})"), loc)?;
+                let class = self.upgraded(super::upgrade::texture(&class, &mut params), loc);
                 let float = match kind.as_str() {
                     "float" => true,
                     "spectrum" | "color" => false,
@@ -459,8 +478,9 @@ impl Parser {
             "Material" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a material type", loc)?;
-                let params = self.params(c, format!("Material {ty:?}"), loc)?;
-                let m = self.material(&ty, &params, loc)?;
+                let mut params = self.params(c, format!("Material {ty:?}"), loc)?;
+                let v4 = self.upgraded(super::upgrade::material(&ty, &mut params)?, loc);
+                let m = self.material(&v4, &params, loc).map_err(|e| upgraded_from(e, &ty, &v4))?;
                 params.check_unused()?;
                 self.materials.push(m);
                 self.state.material = self.materials.len() as u32 - 1;
@@ -468,11 +488,12 @@ impl Parser {
             "MakeNamedMaterial" => {
                 self.need_world(loc, name, true)?;
                 let material_name = c.string("a material name", loc)?;
-                let params = self.params(c, format!("MakeNamedMaterial {material_name:?}"), loc)?;
+                let mut params = self.params(c, format!("MakeNamedMaterial {material_name:?}"), loc)?;
                 let ty = params
                     .string("type")?
                     .ok_or_else(|| SceneError::at(loc, "MakeNamedMaterial needs \"string type\""))?;
-                let m = self.material(&ty, &params, loc)?;
+                let v4 = self.upgraded(super::upgrade::material(&ty, &mut params)?, loc);
+                let m = self.material(&v4, &params, loc).map_err(|e| upgraded_from(e, &ty, &v4))?;
                 params.check_unused()?;
                 self.materials.push(m);
                 self.named_materials.insert(material_name, self.materials.len() as u32 - 1);
@@ -488,7 +509,8 @@ impl Parser {
             "AreaLightSource" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a light type", loc)?;
-                let params = self.params(c, format!("AreaLightSource {ty:?}"), loc)?;
+                let mut params = self.params(c, format!("AreaLightSource {ty:?}"), loc)?;
+                let ty = self.upgraded(super::upgrade::light(&ty, &mut params, true), loc);
                 if ty != "diffuse" {
                     return Err(SceneError::at(loc, format!("unsupported area light {ty:?} (supported: diffuse)")));
                 }
@@ -505,7 +527,8 @@ impl Parser {
             "LightSource" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a light type", loc)?;
-                let params = self.params(c, format!("LightSource {ty:?}"), loc)?;
+                let mut params = self.params(c, format!("LightSource {ty:?}"), loc)?;
+                let ty = self.upgraded(super::upgrade::light(&ty, &mut params, false), loc);
                 let light = self.light(&ty, &params, loc)?;
                 params.check_unused()?;
                 if matches!(light, Light::Environment { .. })
@@ -518,7 +541,8 @@ impl Parser {
             "Shape" => {
                 self.need_world(loc, name, true)?;
                 let ty = c.string("a shape type", loc)?;
-                let params = self.params(c, format!("Shape {ty:?}"), loc)?;
+                let mut params = self.params(c, format!("Shape {ty:?}"), loc)?;
+                let ty = self.upgraded(super::upgrade::shape(&ty, &mut params), loc);
                 self.shape(&ty, &params, loc)?;
                 params.check_unused()?;
             }
