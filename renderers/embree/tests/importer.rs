@@ -242,7 +242,7 @@ fn every_error_names_the_file_line_and_problem() {
     );
     error_at("AreaLightSource \"spot\"\n", 1, "unsupported area light");
     error_at("LightSource \"goniometric\"\n", 1, "unsupported light \"goniometric\"");
-    error_at("LightSource \"infinite\" \"string filename\" \"sky.exr\"\n", 1, "environment maps are not implemented");
+    error_at("LightSource \"infinite\" \"string filename\" \"sky.exr\"\n", 1, "sky.exr");
     error_at("ActiveTransform Sometimes\n", 1, "StartTime, EndTime or All");
     error_at("\"float x\" 1\n", 1, "expected a directive");
 }

@@ -124,3 +124,96 @@ fn a_light_with_a_bad_cone_is_an_error_naming_the_line() {
     let err = scene(&text, &[]).err().unwrap();
     assert!(err.contains("scene.pbrt:6:") && err.contains("conedeltaangle"), "{err}");
 }
+
+/// A square EXR environment map of `size` pixels with a pattern, and its pixels.
+fn environment_file(size: usize) -> (Vec<u8>, Vec<[f32; 3]>) {
+    let pixels: Vec<[f32; 3]> = (0..size * size)
+        .map(|i| {
+            let (x, y) = (i % size, i / size);
+            let v = 0.2 + ((x * 7 + y * 13) % 10) as f32 / 5.0;
+            [v, 0.5 * v, if x < size / 4 { 4.0 } else { 0.1 }]
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sky.exr");
+    let flat: Vec<f32> = pixels.iter().flatten().copied().collect();
+    fbksd_iqa::image::write_exr(&path, size as u32, size as u32, &flat).unwrap();
+    (std::fs::read(&path).unwrap(), pixels)
+}
+
+#[test]
+fn an_environment_map_lights_a_plane_with_its_cosine_weighted_mean() {
+    // The plane's normal is world +y, which `Rotate -90 1 0 0` makes the
+    // map's +z. Its irradiance is the sum over pixels of L cos θ times each
+    // pixel's solid angle, 4π/N (the mapping is equal-area), summed here
+    // over 8 × 8 points per pixel.
+    let size = 32;
+    let (file, pixels) = environment_file(size);
+    let text = header(8, 8, 60.0, 1)
+        + "AttributeBegin\nRotate -90 1 0 0\nLightSource \"infinite\" \"string filename\" \"sky.exr\"\nAttributeEnd\n\
+           Shape \"trianglemesh\" \"point3 P\" [-50 -1 -50  50 -1 -50  50 -1 50  -50 -1 50] \"integer indices\" [0 2 1 0 3 2]\n";
+    let scene = scene(&text, &[("sky.exr", &file)]).unwrap();
+    let (sub, mut expected) = (8, [0f64; 3]);
+    for (i, p) in pixels.iter().enumerate() {
+        for k in 0..sub * sub {
+            let u = ((i % size) as f64 + ((k % sub) as f64 + 0.5) / sub as f64) / size as f64;
+            let v = ((i / size) as f64 + ((k / sub) as f64 + 0.5) / sub as f64) / size as f64;
+            let z = fbksd_embree::scene::environment::square_to_sphere([u as f32, v as f32]).z.max(0.0) as f64;
+            for c in 0..3 {
+                expected[c] += p[c] as f64 * z * 4.0 * PI / (size * size * sub * sub) as f64;
+            }
+        }
+    }
+    // DIRECT_LIGHT (light samples alone) is E/π; COLOR (light and BSDF
+    // samples, weighted by MIS) is the default material's ρ/π E.
+    let l = layout(&["DEPTH", "DIRECT_LIGHT_R", "DIRECT_LIGHT_G", "DIRECT_LIGHT_B", "COLOR_R", "COLOR_G", "COLOR_B"]);
+    let (data, repairs) = samples(&scene, &l, 2048, 0);
+    assert_eq!(repairs, 0);
+    let hits: Vec<&[f32]> = data.chunks_exact(7).filter(|s| s[0] > 0.0).collect();
+    assert!(hits.len() > 1000);
+    for c in 0..3 {
+        let mean = |e: usize| hits.iter().map(|s| s[e] as f64).sum::<f64>() / hits.len() as f64;
+        let want = expected[c] / PI;
+        assert!((mean(1 + c) - want).abs() < 0.01 * want, "channel {c}: E/π {} vs {want}", mean(1 + c));
+        assert!(
+            (mean(4 + c) - ALBEDO * want).abs() < 0.01 * want,
+            "channel {c}: colour {} vs {}",
+            mean(4 + c),
+            ALBEDO * want
+        );
+    }
+}
+
+#[test]
+fn a_camera_ray_that_misses_sees_the_map_in_its_direction() {
+    let size = 16;
+    let (file, pixels) = environment_file(size);
+    let text = header(10, 10, 60.0, 1) + "LightSource \"infinite\" \"string filename\" \"sky.exr\" \"float scale\" 2\n";
+    let scene = scene(&text, &[("sky.exr", &file)]).unwrap();
+    let l = layout(&["IMAGE_X", "IMAGE_Y", "COLOR_R", "COLOR_G", "COLOR_B"]);
+    let (data, _) = samples(&scene, &l, 4, 0);
+    let tan = 30f64.to_radians().tan();
+    for s in data.chunks_exact(5) {
+        // Camera at the origin looking down +z, +x to the right, +y up.
+        let (sx, sy) = ((s[0] as f64 / 10.0) * 2.0 - 1.0, 1.0 - (s[1] as f64 / 10.0) * 2.0);
+        let d = fbksd_embree::math::vec3((sx * tan) as f32, (sy * tan) as f32, 1.0).normalize();
+        let [u, v] = fbksd_embree::scene::environment::sphere_to_square(d);
+        let p = pixels[((v * size as f32) as usize).min(size - 1) * size + ((u * size as f32) as usize).min(size - 1)];
+        // Pixels near a boundary may round either way; most must match exactly.
+        let want = [2.0 * p[0], 2.0 * p[1], 2.0 * p[2]];
+        if s[2..5] != want {
+            let near_edge = [u, v].iter().any(|t| ((t * size as f32) - (t * size as f32).round()).abs() < 1e-3);
+            assert!(near_edge, "direction {d:?}: {:?} vs {want:?}", &s[2..5]);
+        }
+    }
+}
+
+#[test]
+fn an_environment_map_must_be_square() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wide.exr");
+    fbksd_iqa::image::write_exr(&path, 4, 2, &[1.0; 24]).unwrap();
+    let text = header(4, 4, 60.0, 1) + "LightSource \"infinite\" \"string filename\" \"wide.exr\"\n";
+    let err = scene(&text, &[("wide.exr", &std::fs::read(&path).unwrap())]).err().unwrap();
+    assert!(err.contains("scene.pbrt:6:") && err.contains("4×2") && err.contains("square"), "{err}");
+}

@@ -12,6 +12,7 @@ use super::parser::Parser;
 use super::{ply, Loc, SceneError};
 use crate::math::{Transform, Vec3};
 use crate::scene::camera::Camera;
+use crate::scene::environment::EnvironmentMap;
 use crate::scene::light::{area_cdf, Light, LightTriangle};
 use crate::scene::material::{ConductorIndex, Material, Roughness};
 use crate::scene::shape::{Geometry, Shape};
@@ -245,13 +246,36 @@ impl Parser {
         let to = || point("to", Vec3 { x: 0.0, y: 0.0, z: 1.0 });
         Ok(match ty {
             "infinite" => {
-                if params.string("filename")?.is_some() {
-                    return Err(params.invalid(
-                        "filename",
-                        "is not supported: environment maps are not implemented; give a constant \"rgb L\"",
-                    ));
+                if params.ignore("portal") {
+                    self.warn(loc, "\"portal\" ignored: a hint for sampling the environment through windows");
                 }
-                Light::Environment { radiance: rgb("L")? * scale }
+                match params.string("filename")? {
+                    None => Light::Environment {
+                        radiance: rgb("L")? * scale * target("illuminance", std::f32::consts::PI)?,
+                    },
+                    Some(file) => {
+                        if params.has("L") {
+                            return Err(params.invalid("L", "cannot be given with a filename"));
+                        }
+                        if params.has("illuminance") {
+                            return Err(params.invalid("illuminance", "is not supported with an image"));
+                        }
+                        let path = self.resolve(&file);
+                        let image = read_image(&path, Encoding::Srgb).map_err(|e| SceneError::at(loc, e))?;
+                        if image.width != image.height {
+                            return Err(params.invalid(
+                                "filename",
+                                &format!(
+                                    "names a {}×{} image: environment maps are square, in pbrt-v4's equal-area mapping (pbrt's imgtool makeequiarea converts a latitude–longitude map)",
+                                    image.width, image.height
+                                ),
+                            ));
+                        }
+                        let pixels = image.pixels.into_iter().map(|p| p * scale).collect();
+                        let map = EnvironmentMap::new(image.width, pixels, &t0);
+                        Light::ImageEnvironment { map: Arc::new(map) }
+                    }
+                }
             }
             "point" => {
                 let intensity = rgb("I")? * scale * target("power", 4.0 * std::f32::consts::PI)?;

@@ -18,8 +18,10 @@
 //! `constant`, `scale`); `Material`, `MakeNamedMaterial`, `NamedMaterial`
 //! (`diffuse`, `conductor`, `dielectric`, `coateddiffuse`); `Shape`
 //! (`trianglemesh`, `plymesh`, `sphere`, `curve`); `AreaLightSource
-//! "diffuse"`; `LightSource` `"infinite"` (constant), `"point"`, `"spot"`,
-//! `"distant"`. Anything else is an error naming the file and line.
+//! "diffuse"`; `LightSource` `"infinite"` (constant, or a square image in
+//! pbrt-v4's equal-area mapping), `"point"`, `"spot"`, `"distant"`.
+//! pbrt-v3 files are read as pbrt-v4's upgrade converts them (see
+//! `upgrade`). Anything else is an error naming the file and line.
 
 mod build;
 pub mod lexer;

@@ -531,9 +531,7 @@ impl Parser {
                 let ty = self.upgraded(super::upgrade::light(&ty, &mut params, false), loc);
                 let light = self.light(&ty, &params, loc)?;
                 params.check_unused()?;
-                if matches!(light, Light::Environment { .. })
-                    && self.lights.iter().any(|l| matches!(l, Light::Environment { .. }))
-                {
+                if light.is_environment() && self.lights.iter().any(Light::is_environment) {
                     return Err(SceneError::at(loc, "a second infinite light (only one is supported)"));
                 }
                 self.lights.push(light);

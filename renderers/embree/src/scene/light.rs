@@ -47,6 +47,11 @@ pub enum Light {
         /// The radiance.
         radiance: Vec3,
     },
+    /// Radiance from every direction, from an image (pbrt's `infinite` with a `filename`).
+    ImageEnvironment {
+        /// The image, its sampling distribution and placement.
+        map: std::sync::Arc<crate::scene::environment::EnvironmentMap>,
+    },
     /// Light from one point, the same in every direction (pbrt's `point`).
     Point {
         /// Position.
@@ -145,6 +150,12 @@ impl Light {
         matches!(self, Light::Point { .. } | Light::Spot { .. } | Light::Distant { .. })
     }
 
+    /// Whether the light surrounds the scene (found by rays that miss everything).
+    #[inline]
+    pub fn is_environment(&self) -> bool {
+        matches!(self, Light::Environment { .. } | Light::ImageEnvironment { .. })
+    }
+
     /// Emitted radiance leaving a point with normal `n` towards `w`.
     #[inline]
     pub fn emitted(&self, n: Vec3, w: Vec3) -> Vec3 {
@@ -157,6 +168,7 @@ impl Light {
                 }
             }
             Light::Environment { radiance } => *radiance,
+            Light::ImageEnvironment { map } => map.radiance(-w),
             Light::Point { .. } | Light::Spot { .. } | Light::Distant { .. } => Vec3::ZERO,
         }
     }
@@ -168,6 +180,7 @@ impl Light {
                 radiance.average() * area * PI * if *two_sided { 2.0 } else { 1.0 }
             }
             Light::Environment { radiance } => radiance.average() * PI * PI * scene_radius * scene_radius * 4.0,
+            Light::ImageEnvironment { map } => map.mean.average() * PI * PI * scene_radius * scene_radius * 4.0,
             Light::Point { intensity, .. } => 4.0 * PI * intensity.average(),
             Light::Spot { intensity, cos_falloff_start, cos_falloff_end, .. } => {
                 intensity.average()
@@ -248,6 +261,10 @@ impl Light {
                 let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
                 (pdf.is_finite() && distance > 0.0).then_some(LightSample { wi, distance, radiance, pdf })
             }
+            Light::ImageEnvironment { map } => {
+                let (wi, radiance, pdf) = map.sample(u)?;
+                Some(LightSample { wi, distance: f32::INFINITY, radiance, pdf })
+            }
             Light::Point { position, intensity } => {
                 let (wi, distance) = Self::towards(p, *position)?;
                 Some(LightSample { wi, distance, radiance: *intensity / (distance * distance), pdf: 1.0 })
@@ -302,6 +319,7 @@ impl Light {
         };
         match self {
             Light::Environment { .. } => 1.0 / (4.0 * PI),
+            Light::ImageEnvironment { map } => map.pdf(wi),
             Light::Mesh { area, .. } => area_pdf(1.0 / area),
             Light::Sphere { center, radius, .. } => {
                 let dc2 = (*center - p).length_squared();

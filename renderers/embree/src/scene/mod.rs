@@ -2,6 +2,7 @@
 //! with ray queries that return shading-ready surface points.
 
 pub mod camera;
+pub mod environment;
 pub mod light;
 pub mod material;
 pub mod shape;
@@ -78,7 +79,7 @@ impl Scene {
             }
         }
         let has_motion = shapes.iter().any(|s| s.geometry.moves()) && camera.shutter[0] != camera.shutter[1];
-        let environment = lights.iter().position(|l| matches!(l, Light::Environment { .. })).map(|i| i as u32);
+        let environment = lights.iter().position(Light::is_environment).map(|i| i as u32);
         // Choose lights by power, mixed with a uniform choice so no light is starved.
         let area_of = |i: usize| shapes.iter().find(|s| s.light == Some(i as u32)).map_or(0.0, |s| s.geometry.area());
         let powers: Vec<f32> =
@@ -233,7 +234,7 @@ impl Scene {
             .set("max_depth", self.max_depth as i64)
             .set("has_dof", self.camera.has_dof())
             .set("has_motion_blur", self.has_motion)
-            .set("has_area_lights", self.lights.iter().any(|l| !matches!(l, Light::Environment { .. })))
+            .set("has_area_lights", self.lights.iter().any(|l| !l.is_environment()))
             .set("has_environment_light", self.environment.is_some())
             .set("shutter_open", self.camera.shutter[0] as f64)
             .set("shutter_close", self.camera.shutter[1] as f64)
