@@ -19,7 +19,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Parse a scene; print its scene info.
+    /// What a scene file uses, whether it loads, and what it would need:
+    /// every unsupported construct with its file and line, every
+    /// conversion (pbrt-v3 forms, hints), and the scene info. Exits with
+    /// status 1 when the scene does not load.
     Check { scene: PathBuf },
     /// Render a scene's colour at N stratified samples per pixel (box
     /// filter) to an EXR file, or an sRGB preview when OUT ends in .png.
@@ -91,10 +94,32 @@ fn run() -> anyhow::Result<()> {
     match (cli.command, cli.scene) {
         (None, Some(scene)) => fbksd_embree::serve(load(&scene)?)?,
         (None, None) => anyhow::bail!("usage: fbksd-embree <scene.pbrt> (see --help)"),
-        (Some(Command::Check { scene }), _) => {
-            let scene = load(&scene)?;
-            for (k, v) in scene.info().iter() {
-                println!("{k} = {v}");
+        (Some(Command::Check { scene: path }), _) => {
+            let survey = pbrt::survey(&path);
+            println!("{} uses:", path.display());
+            for (what, count) in &survey.uses {
+                println!("  {count:>6} × {what}");
+            }
+            if !survey.problems.is_empty() {
+                println!("It does not load. It would need ({} problems):", survey.problems.len());
+                for line in pbrt::summarize(&survey.problems) {
+                    println!("  {line}");
+                }
+            }
+            if !survey.warnings.is_empty() {
+                println!("Read with conversions ({}):", survey.warnings.len());
+                for line in pbrt::summarize(&survey.warnings) {
+                    println!("  {line}");
+                }
+            }
+            match survey.scene {
+                Some(scene) => {
+                    println!("It loads:");
+                    for (k, v) in scene.info().iter() {
+                        println!("  {k} = {v}");
+                    }
+                }
+                None => std::process::exit(1),
             }
         }
         (Some(Command::Render { scene, spp, out, threads, request }), _) => {

@@ -86,6 +86,8 @@ pub fn load_with_warnings(path: &Path) -> Result<(crate::scene::Scene, Vec<Scene
     parser::load(path)
 }
 
+pub use parser::{survey, Survey};
+
 /// One line per kind of warning: the first place, and how many more.
 pub fn summarize(warnings: &[SceneError]) -> Vec<String> {
     let mut kinds: Vec<(&str, &SceneError, usize)> = Vec::new();

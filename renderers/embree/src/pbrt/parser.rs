@@ -65,6 +65,11 @@ pub(super) struct Parser {
     include_depth: u32,
     /// Constructs read with a conversion (pbrt-v3 forms, ignored hints), in file order.
     pub(super) warnings: std::cell::RefCell<Vec<SceneError>>,
+    /// Survey mode: record each directive's error and go on to the next.
+    keep_going: bool,
+    problems: Vec<SceneError>,
+    /// Directive and type counts (survey mode).
+    uses: std::collections::BTreeMap<String, usize>,
 }
 
 /// Reads tokens one at a time.
@@ -161,6 +166,34 @@ impl Cursor {
     }
 }
 
+/// How a directive counts in a survey: its name, and its type for those that have one.
+fn used_as(directive: &str, c: &Cursor) -> String {
+    let string = |k: usize| match c.tokens.get(c.pos + k) {
+        Some(Token { tok: Tok::Str(s), .. }) => Some(s.clone()),
+        _ => None,
+    };
+    let ty = match directive {
+        "Shape" | "Material" | "LightSource" | "AreaLightSource" | "Camera" | "Sampler" | "Integrator" | "Film"
+        | "PixelFilter" | "MakeNamedMedium" => string(0),
+        "Texture" => string(2),
+        // Its type is among its parameters: the string after "string type", up to the next directive.
+        "MakeNamedMaterial" => c.tokens[c.pos.min(c.tokens.len())..]
+            .iter()
+            .take_while(|t| !matches!(t.tok, Tok::Word(_)))
+            .skip_while(|t| !matches!(&t.tok, Tok::Str(s) if s == "string type"))
+            .skip(1)
+            .find_map(|t| match &t.tok {
+                Tok::Str(s) => Some(s.clone()),
+                _ => None,
+            }),
+        _ => None,
+    };
+    match ty {
+        Some(ty) => format!("{directive} {ty:?}"),
+        None => directive.to_string(),
+    }
+}
+
 /// An error about a directive that was upgraded names what the file said.
 fn upgraded_from(mut e: SceneError, v3: &str, v4: &str) -> SceneError {
     if v3 != v4 {
@@ -172,43 +205,91 @@ fn upgraded_from(mut e: SceneError, v3: &str, v4: &str) -> SceneError {
 /// Parses `path` and everything it includes, and builds the scene; also
 /// returns a warning for each construct read with a conversion.
 pub fn load(path: &Path) -> Result<(Scene, Vec<SceneError>), SceneError> {
-    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mut parser = Parser {
-        base,
-        state: GraphicsState {
-            ctm: [Transform::IDENTITY; 2],
-            active: Active::All,
-            material: 0,
-            area_light: None,
-            reverse_orientation: false,
-        },
-        stack: Vec::new(),
-        coordinate_systems: HashMap::new(),
-        transform_times: [0.0, 1.0],
-        in_world: false,
-        options: Options::default(),
-        textures: HashMap::new(),
-        float_textures: HashMap::new(),
-        named_materials: HashMap::new(),
-        // pbrt's default material.
-        materials: vec![Material::Diffuse { reflectance: Arc::new(Texture::Constant(Vec3::splat(0.5))) }],
-        shapes: Vec::new(),
-        lights: Vec::new(),
-        include_depth: 0,
-        warnings: Default::default(),
-    };
+    let mut parser = Parser::new(path, false);
     parser.file(path, None)?;
-    let end = Loc { file: Arc::from(path), line: 0 };
-    if let Some((_, loc, _)) = parser.stack.last() {
-        return Err(SceneError::at(loc, "AttributeBegin without a matching AttributeEnd"));
-    }
-    if !parser.in_world {
-        return Err(SceneError::at(&end, "no WorldBegin: the file describes no scene"));
-    }
+    parser.end(path)?;
     parser.finish(path)
 }
 
+/// What a scene uses and what stops it from loading: every directive is
+/// read, past any errors.
+#[derive(Default)]
+pub struct Survey {
+    /// How often each directive and type occurs (`Shape "sphere"`), in name order.
+    pub uses: std::collections::BTreeMap<String, usize>,
+    /// Every error, in file order; none when the scene loads.
+    pub problems: Vec<SceneError>,
+    /// Every conversion, in file order.
+    pub warnings: Vec<SceneError>,
+    /// The scene, when it loads.
+    pub scene: Option<Scene>,
+}
+
+/// Surveys `path` and everything it includes (see [`Survey`]).
+pub fn survey(path: &Path) -> Survey {
+    let mut parser = Parser::new(path, true);
+    if let Err(e) = parser.file(path, None).and_then(|()| parser.end(path)) {
+        parser.problems.push(e);
+    }
+    let uses = std::mem::take(&mut parser.uses);
+    let mut problems = std::mem::take(&mut parser.problems);
+    let (scene, warnings) = if problems.is_empty() {
+        match parser.finish(path) {
+            Ok((scene, warnings)) => (Some(scene), warnings),
+            Err(e) => {
+                problems.push(e);
+                (None, Vec::new())
+            }
+        }
+    } else {
+        (None, parser.warnings.take())
+    };
+    Survey { uses, problems, warnings, scene }
+}
+
 impl Parser {
+    fn new(path: &Path, keep_going: bool) -> Parser {
+        Parser {
+            base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
+            state: GraphicsState {
+                ctm: [Transform::IDENTITY; 2],
+                active: Active::All,
+                material: 0,
+                area_light: None,
+                reverse_orientation: false,
+            },
+            stack: Vec::new(),
+            coordinate_systems: HashMap::new(),
+            transform_times: [0.0, 1.0],
+            in_world: false,
+            options: Options::default(),
+            textures: HashMap::new(),
+            float_textures: HashMap::new(),
+            named_materials: HashMap::new(),
+            // pbrt's default material.
+            materials: vec![Material::Diffuse { reflectance: Arc::new(Texture::Constant(Vec3::splat(0.5))) }],
+            shapes: Vec::new(),
+            lights: Vec::new(),
+            include_depth: 0,
+            warnings: Default::default(),
+            keep_going,
+            problems: Vec::new(),
+            uses: Default::default(),
+        }
+    }
+
+    /// The checks at the end of the files.
+    fn end(&self, path: &Path) -> Result<(), SceneError> {
+        let end = Loc { file: Arc::from(path), line: 0 };
+        if let Some((_, loc, _)) = self.stack.last() {
+            return Err(SceneError::at(loc, "AttributeBegin without a matching AttributeEnd"));
+        }
+        if !self.in_world {
+            return Err(SceneError::at(&end, "no WorldBegin: the file describes no scene"));
+        }
+        Ok(())
+    }
+
     /// Notes a construct read with a conversion.
     pub(super) fn warn(&self, loc: &Loc, message: impl Into<String>) {
         self.warnings.borrow_mut().push(SceneError::at(loc, message));
@@ -255,7 +336,20 @@ impl Parser {
             let Tok::Word(directive) = &token.tok else {
                 return Err(SceneError::at(&token.loc, format!("expected a directive, found {:?}", token.tok)));
             };
-            self.directive(directive, &token.loc, &mut cursor)?;
+            if self.keep_going {
+                *self.uses.entry(used_as(directive, &cursor)).or_default() += 1;
+            }
+            let result = self.directive(directive, &token.loc, &mut cursor);
+            match result {
+                Err(e) if self.keep_going => {
+                    self.problems.push(e);
+                    // On to the next directive.
+                    while cursor.peek().is_some_and(|t| !matches!(t.tok, Tok::Word(_))) {
+                        cursor.next();
+                    }
+                }
+                other => other?,
+            }
         }
         let _ = cursor.end;
         Ok(())
