@@ -61,8 +61,8 @@ pub fn export_for_mitsuba(path: &Path, dir: &Path) -> anyhow::Result<()> {
     use anyhow::bail;
     let scene = crate::pbrt::load(path)?;
     std::fs::create_dir_all(dir)?;
-    if scene.camera.has_dof() || scene.has_motion {
-        bail!("export: only pinhole cameras and static scenes");
+    if scene.camera.has_dof() || scene.has_motion || scene.has_instances() {
+        bail!("export: only pinhole cameras and static scenes without instances");
     }
     let mut shapes = Vec::new();
     for (i, shape) in scene.shapes.iter().enumerate() {

@@ -1,7 +1,7 @@
 //! A small safe layer over Embree 3 (Debian's `libembree-dev`): a device, a
 //! scene of triangle meshes, spheres and Bézier curves with optional linear
-//! motion (two time steps), and batched intersection and occlusion queries
-//! traced in packets of 16 rays.
+//! motion (two time steps) and single-level instances of prototype scenes,
+//! and batched intersection and occlusion queries traced in packets of 16.
 //!
 //! Hand-written rather than a binding crate: the renderer uses a dozen
 //! entry points, and the crates on the registry target other Embree
@@ -24,6 +24,8 @@ mod sys {
     pub const GEOMETRY_ROUND_BEZIER_CURVE: c_uint = 24;
     pub const GEOMETRY_FLAT_BEZIER_CURVE: c_uint = 25;
     pub const GEOMETRY_SPHERE_POINT: c_uint = 50;
+    pub const GEOMETRY_INSTANCE: c_uint = 121;
+    pub const FORMAT_FLOAT3X4_ROW_MAJOR: c_uint = 0x9134;
     pub const BUFFER_INDEX: c_uint = 0;
     pub const BUFFER_VERTEX: c_uint = 1;
     pub const FORMAT_UINT: c_uint = 0x5001;
@@ -104,6 +106,8 @@ mod sys {
         ) -> *mut c_void;
         pub fn rtcCommitGeometry(geometry: Geometry);
         pub fn rtcAttachGeometry(scene: Scene, geometry: Geometry) -> c_uint;
+        pub fn rtcSetGeometryInstancedScene(geometry: Geometry, scene: Scene);
+        pub fn rtcSetGeometryTransform(geometry: Geometry, step: c_uint, format: c_uint, xfm: *const c_void);
         pub fn rtcIntersect16(valid: *const c_int, scene: Scene, context: *mut IntersectContext, rayhit: *mut RayHit16);
         pub fn rtcOccluded16(valid: *const c_int, scene: Scene, context: *mut IntersectContext, ray: *mut Ray16);
     }
@@ -148,6 +152,20 @@ pub enum Primitives<'a> {
 pub struct Bvh {
     device: NonNull<c_void>,
     scene: NonNull<c_void>,
+    /// The scenes that instances place (pbrt's `ObjectBegin` objects).
+    prototypes: Vec<NonNull<c_void>>,
+    /// Geometries of the top-level scene before the instances.
+    geometry_count: u32,
+}
+
+/// An instance of a prototype: which, and where (object to world, the
+/// rows of a 3 × 4 matrix).
+#[derive(Debug, Clone, Copy)]
+pub struct Placement {
+    /// Index into the prototypes given to [`Bvh::build`].
+    pub prototype: u32,
+    /// Object to world.
+    pub transform: [[f32; 4]; 3],
 }
 
 // SAFETY: Embree documents a committed scene as safe to query concurrently,
@@ -160,6 +178,9 @@ impl Drop for Bvh {
         // SAFETY: both handles were created by this struct and are released once.
         unsafe {
             sys::rtcReleaseScene(self.scene.as_ptr());
+            for p in &self.prototypes {
+                sys::rtcReleaseScene(p.as_ptr());
+            }
             sys::rtcReleaseDevice(self.device.as_ptr());
         }
     }
@@ -179,6 +200,9 @@ pub struct RayHit {
     pub uv: [f32; 2],
     /// Geometric normal, not normalised.
     pub ng: [f32; 3],
+    /// The instance hit (an index into the placements given to
+    /// [`Bvh::build`]); `geometry` then numbers the prototype's geometries.
+    pub instance: Option<u32>,
 }
 
 fn check(device: sys::Device, call: &'static str) -> Result<(), EmbreeError> {
@@ -210,30 +234,65 @@ unsafe fn fill_buffer<T: Copy>(geometry: sys::Geometry, kind: u32, slot: u32, fo
 
 impl Bvh {
     /// Builds a scene of `geometries`; geometry `i` is reported as `i`.
-    pub fn build(geometries: &[Primitives<'_>]) -> Result<Bvh, EmbreeError> {
+    pub fn build(
+        geometries: &[Primitives<'_>],
+        prototypes: &[Vec<Primitives<'_>>],
+        placements: &[Placement],
+    ) -> Result<Bvh, EmbreeError> {
         let robust = std::env::var_os("FBKSD_EMBREE_ROBUST").is_some();
         // SAFETY: plain constructor calls; every handle is checked and owned below.
         unsafe {
             let device = sys::rtcNewDevice(std::ptr::null());
             let device = NonNull::new(device).ok_or(EmbreeError { code: 1, call: "rtcNewDevice" })?;
-            let scene = sys::rtcNewScene(device.as_ptr());
-            let bvh = Bvh { device, scene: NonNull::new(scene).ok_or(EmbreeError { code: 1, call: "rtcNewScene" })? };
-            if robust {
-                // Watertight traversal: no ray slips through an edge shared by two triangles.
-                sys::rtcSetSceneFlags(scene, sys::SCENE_FLAG_ROBUST);
+            let new_scene = || {
+                let scene = NonNull::new(sys::rtcNewScene(device.as_ptr()))
+                    .ok_or(EmbreeError { code: 1, call: "rtcNewScene" })?;
+                if robust {
+                    // Watertight traversal: no ray slips through an edge shared by two triangles.
+                    sys::rtcSetSceneFlags(scene.as_ptr(), sys::SCENE_FLAG_ROBUST);
+                }
+                sys::rtcSetSceneBuildQuality(scene.as_ptr(), sys::BUILD_QUALITY_HIGH);
+                Ok::<_, EmbreeError>(scene)
+            };
+            let scene = new_scene()?;
+            let mut bvh = Bvh { device, scene, prototypes: Vec::new(), geometry_count: geometries.len() as u32 };
+            for prototype in prototypes {
+                let p = new_scene()?;
+                bvh.prototypes.push(p);
+                for (i, primitives) in prototype.iter().enumerate() {
+                    let id = bvh.attach(p, primitives)?;
+                    assert_eq!(id as usize, i, "Embree numbers geometries in attachment order");
+                }
+                sys::rtcCommitScene(p.as_ptr());
+                check(device.as_ptr(), "rtcCommitScene")?;
             }
-            sys::rtcSetSceneBuildQuality(scene, sys::BUILD_QUALITY_HIGH);
             for (i, primitives) in geometries.iter().enumerate() {
-                let id = bvh.attach(primitives)?;
+                let id = bvh.attach(scene, primitives)?;
                 assert_eq!(id as usize, i, "Embree numbers geometries in attachment order");
             }
-            sys::rtcCommitScene(scene);
+            for placement in placements {
+                let instance = sys::rtcNewGeometry(device.as_ptr(), sys::GEOMETRY_INSTANCE);
+                check(device.as_ptr(), "rtcNewGeometry")?;
+                let prototype = bvh.prototypes[placement.prototype as usize];
+                sys::rtcSetGeometryInstancedScene(instance, prototype.as_ptr());
+                sys::rtcSetGeometryTransform(
+                    instance,
+                    0,
+                    sys::FORMAT_FLOAT3X4_ROW_MAJOR,
+                    placement.transform.as_ptr() as *const c_void,
+                );
+                sys::rtcCommitGeometry(instance);
+                sys::rtcAttachGeometry(scene.as_ptr(), instance);
+                sys::rtcReleaseGeometry(instance);
+                check(device.as_ptr(), "instance")?;
+            }
+            sys::rtcCommitScene(scene.as_ptr());
             check(device.as_ptr(), "rtcCommitScene")?;
             Ok(bvh)
         }
     }
 
-    fn attach(&self, primitives: &Primitives<'_>) -> Result<u32, EmbreeError> {
+    fn attach(&self, scene: NonNull<c_void>, primitives: &Primitives<'_>) -> Result<u32, EmbreeError> {
         let device = self.device.as_ptr();
         let (kind, steps) = match primitives {
             Primitives::Triangles { positions, .. } => (sys::GEOMETRY_TRIANGLE, positions.len()),
@@ -270,7 +329,7 @@ impl Bvh {
             }
             check(device, "rtcSetNewGeometryBuffer")?;
             sys::rtcCommitGeometry(geometry);
-            let id = sys::rtcAttachGeometry(self.scene.as_ptr(), geometry);
+            let id = sys::rtcAttachGeometry(scene.as_ptr(), geometry);
             sys::rtcReleaseGeometry(geometry);
             check(device, "rtcAttachGeometry")?;
             Ok(id)
@@ -295,13 +354,16 @@ impl Bvh {
             // SAFETY: the scene is committed; the packet and mask have Embree's layout and alignment.
             unsafe { sys::rtcIntersect16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, &mut packet) };
             let (ray, hit) = (&packet.ray, &packet.hit);
+            let first_instance = self.geometry_count;
             hits.extend((0..chunk.len()).map(|k| {
+                let instance = hit.inst_id[0][k];
                 (hit.geom_id[k] != sys::INVALID_ID).then(|| RayHit {
                     t: ray.tfar[k],
                     geometry: hit.geom_id[k],
                     primitive: hit.prim_id[k],
                     uv: [hit.u[k], hit.v[k]],
                     ng: [hit.ng_x[k], hit.ng_y[k], hit.ng_z[k]],
+                    instance: (instance != sys::INVALID_ID).then(|| instance - first_instance),
                 })
             }));
         }
@@ -390,7 +452,8 @@ mod tests {
         let at0 = [[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]];
         let at1 = [[10.0, 0.0, 5.0], [11.0, 0.0, 5.0], [10.0, 1.0, 5.0]];
         let indices = [[0u32, 1, 2]];
-        let bvh = Bvh::build(&[Primitives::Triangles { positions: vec![&at0, &at1], indices: &indices }]).unwrap();
+        let bvh =
+            Bvh::build(&[Primitives::Triangles { positions: vec![&at0, &at1], indices: &indices }], &[], &[]).unwrap();
         let query =
             |x: f32, tfar: f32, time: f32| Query { org: [x, 0.2, 0.0], dir: [0.0, 0.0, 1.0], tnear: 0.0, tfar, time };
         let mut hits = Vec::new();
@@ -408,7 +471,7 @@ mod tests {
         // and passing beside it, over 37 queries (three packets, the last partial).
         let wall = [[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]];
         let indices = [[0u32, 1, 2]];
-        let bvh = Bvh::build(&[Primitives::Triangles { positions: vec![&wall], indices: &indices }]).unwrap();
+        let bvh = Bvh::build(&[Primitives::Triangles { positions: vec![&wall], indices: &indices }], &[], &[]).unwrap();
         let queries: Vec<Query> = (0..37)
             .map(|i| Query {
                 org: [if i % 3 == 0 { 5.0 } else { 0.1 }, 0.1, i as f32 * 0.01],

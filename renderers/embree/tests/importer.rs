@@ -180,7 +180,7 @@ fn error_at(body: &str, line: u32, what: &str) {
 #[test]
 fn every_error_names_the_file_line_and_problem() {
     error_at("Frobnicate 1 2 3\n", 1, "unknown directive \"Frobnicate\"");
-    error_at("ObjectBegin \"x\"\n", 1, "unsupported directive ObjectBegin");
+    error_at("MakeNamedMedium \"x\"\n", 1, "unsupported directive MakeNamedMedium");
     error_at(
         "\n\nShape \"sphere\" \"float radius\" 1 \"float zmax\" 0.5\n",
         3,

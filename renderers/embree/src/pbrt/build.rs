@@ -17,7 +17,7 @@ use crate::scene::light::{area_cdf, Light, LightTriangle};
 use crate::scene::material::{ConductorIndex, Material, Roughness};
 use crate::scene::shape::{Geometry, Shape};
 use crate::scene::texture::{read_image, Encoding, Texture, UvMapping, Wrap};
-use crate::scene::Scene;
+use crate::scene::{Instancing, Parts, Scene};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -470,6 +470,15 @@ impl Parser {
         };
         let shape_index = self.shapes.len() as u32;
         let mut light = None;
+        if let (Some(_), Some((object, _))) = (&self.state.area_light, &self.object) {
+            return Err(SceneError::at(
+                loc,
+                format!(
+                    "an area light in object {:?} (pbrt does not instance area lights either)",
+                    self.objects[*object as usize].0
+                ),
+            ));
+        }
         if let Some((radiance, two_sided)) = &self.state.area_light {
             if geometry.moves() {
                 return Err(SceneError::at(loc, "a moving area light is not supported"));
@@ -499,7 +508,11 @@ impl Parser {
                 light = Some(self.lights.len() as u32 - 1);
             }
         }
-        self.shapes.push(Shape { geometry, material: self.state.material, light });
+        let shape = Shape { geometry, material: self.state.material, light };
+        match self.object {
+            Some((object, _)) => self.objects[object as usize].1.push(shape),
+            None => self.shapes.push(shape),
+        }
         Ok(())
     }
 
@@ -601,9 +614,25 @@ impl Parser {
             _ => stem,
         };
         let warnings = self.warnings.take();
-        let scene =
-            Scene::build(name, camera, max_depth, self.shapes, self.materials, self.lights, self.transform_times)
-                .map_err(|e| SceneError { loc: None, message: e.to_string() })?;
+        // Objects' shapes go after the top-level ones, each object's together.
+        let mut shapes = self.shapes;
+        let mut instancing = Instancing { objects: Vec::new(), placements: self.placements };
+        for (_, object_shapes) in self.objects {
+            let start = shapes.len() as u32;
+            shapes.extend(object_shapes);
+            instancing.objects.push(start..shapes.len() as u32);
+        }
+        let scene = Scene::build(Parts {
+            name,
+            camera,
+            max_depth,
+            shapes,
+            materials: self.materials,
+            lights: self.lights,
+            transform_times: self.transform_times,
+            instancing,
+        })
+        .map_err(|e| SceneError { loc: None, message: e.to_string() })?;
         Ok((scene, warnings))
     }
 }

@@ -14,7 +14,8 @@
 //! `ActiveTransform`, `ReverseOrientation`; `Camera "perspective"`,
 //! `Film "rgb"`, `Sampler`, `Integrator "path"`, `PixelFilter "box"`,
 //! `ColorSpace "srgb"`; `WorldBegin`, `AttributeBegin`/`End`,
-//! `TransformBegin`/`End`; `Texture` (`imagemap`, `checkerboard`,
+//! `TransformBegin`/`End`; `ObjectBegin`/`End`, `ObjectInstance` (Embree
+//! instances); `Texture` (`imagemap`, `checkerboard`,
 //! `constant`, `scale`); `Material`, `MakeNamedMaterial`, `NamedMaterial`
 //! (`diffuse`, `conductor`, `dielectric`, `coateddiffuse`); `Shape`
 //! (`trianglemesh`, `plymesh`, `sphere`, `curve`); `AreaLightSource

@@ -65,6 +65,13 @@ pub(super) struct Parser {
     include_depth: u32,
     /// Constructs read with a conversion (pbrt-v3 forms, ignored hints), in file order.
     pub(super) warnings: std::cell::RefCell<Vec<SceneError>>,
+    /// Objects (pbrt's `ObjectBegin`): name and shapes.
+    pub(super) objects: Vec<(String, Vec<Shape>)>,
+    object_names: HashMap<String, u32>,
+    /// The object being defined, and the attribute stack depth its definition began at.
+    pub(super) object: Option<(u32, usize)>,
+    /// (object, object to world) per `ObjectInstance`.
+    pub(super) placements: Vec<(u32, Transform)>,
     /// Survey mode: record each directive's error and go on to the next.
     keep_going: bool,
     problems: Vec<SceneError>,
@@ -272,6 +279,10 @@ impl Parser {
             lights: Vec::new(),
             include_depth: 0,
             warnings: Default::default(),
+            objects: Vec::new(),
+            object_names: HashMap::new(),
+            object: None,
+            placements: Vec::new(),
             keep_going,
             problems: Vec::new(),
             uses: Default::default(),
@@ -282,7 +293,12 @@ impl Parser {
     fn end(&self, path: &Path) -> Result<(), SceneError> {
         let end = Loc { file: Arc::from(path), line: 0 };
         if let Some((_, loc, _)) = self.stack.last() {
-            return Err(SceneError::at(loc, "AttributeBegin without a matching AttributeEnd"));
+            let what = if self.object.is_some() {
+                "ObjectBegin without a matching ObjectEnd"
+            } else {
+                "AttributeBegin without a matching AttributeEnd"
+            };
+            return Err(SceneError::at(loc, what));
         }
         if !self.in_world {
             return Err(SceneError::at(&end, "no WorldBegin: the file describes no scene"));
@@ -638,7 +654,50 @@ impl Parser {
                 self.shape(&ty, &params, loc)?;
                 params.check_unused()?;
             }
-            "ObjectBegin" | "ObjectEnd" | "ObjectInstance" | "MakeNamedMedium" | "MediumInterface" | "Attribute" => {
+            "ObjectBegin" => {
+                self.need_world(loc, name, true)?;
+                let object = c.string("an object name", loc)?;
+                if let Some((current, _)) = &self.object {
+                    return Err(SceneError::at(
+                        loc,
+                        format!("ObjectBegin inside object {:?}", self.objects[*current as usize].0),
+                    ));
+                }
+                if self.object_names.contains_key(&object) {
+                    return Err(SceneError::at(loc, format!("object {object:?} is defined twice")));
+                }
+                // As in pbrt, an object's definition is an attribute block of its own.
+                self.stack.push((self.state.clone(), loc.clone(), false));
+                self.object_names.insert(object.clone(), self.objects.len() as u32);
+                self.object = Some((self.objects.len() as u32, self.stack.len()));
+                self.objects.push((object, Vec::new()));
+            }
+            "ObjectEnd" => {
+                match self.object.take() {
+                    Some((_, depth)) if depth == self.stack.len() => {}
+                    Some(_) => return Err(SceneError::at(loc, "ObjectEnd inside an attribute block of the object")),
+                    None => return Err(SceneError::at(loc, "ObjectEnd without ObjectBegin")),
+                }
+                let (saved, _, _) = self.stack.pop().expect("ObjectBegin pushed the state");
+                self.state = saved;
+            }
+            "ObjectInstance" => {
+                self.need_world(loc, name, true)?;
+                let object = c.string("an object name", loc)?;
+                if self.object.is_some() {
+                    return Err(SceneError::at(loc, "ObjectInstance inside an object's definition"));
+                }
+                let index = *self
+                    .object_names
+                    .get(&object)
+                    .ok_or_else(|| SceneError::at(loc, format!("no object named {object:?}")))?;
+                let [t0, t1] = self.state.ctm;
+                if t0 != t1 {
+                    return Err(SceneError::at(loc, "a moving object instance is not supported"));
+                }
+                self.placements.push((index, t0));
+            }
+            "MakeNamedMedium" | "MediumInterface" | "Attribute" => {
                 return Err(SceneError::at(loc, format!("unsupported directive {name}")))
             }
             other => return Err(SceneError::at(loc, format!("unknown directive {other:?}"))),

@@ -8,14 +8,31 @@ pub mod material;
 pub mod shape;
 pub mod texture;
 
-use crate::embree::{Bvh, EmbreeError, Query};
+use crate::embree::{Bvh, EmbreeError, Placement, Query};
 use crate::integrator::Segment;
 use crate::math::Vec3;
+use crate::math::{Affine, Transform};
 use camera::{Camera, Ray};
 use fbksd_core::SceneInfo;
 use light::Light;
 use material::Material;
 use shape::{Shape, SurfaceHit};
+
+/// A bound on |p| over `shapes`' points (radii included).
+fn bound(shapes: &[Shape]) -> f32 {
+    let mut extent = 0f32;
+    for s in shapes {
+        let mut grow = |p: [f32; 3], r: f32| extent = extent.max(p[0].abs().max(p[1].abs()).max(p[2].abs()) + r);
+        match &s.geometry {
+            shape::Geometry::Mesh { positions, .. } => positions.iter().flatten().for_each(|p| grow(*p, 0.0)),
+            shape::Geometry::Sphere { steps, .. } => steps.iter().for_each(|s| grow([s[0], s[1], s[2]], s[3])),
+            shape::Geometry::Curves { points, .. } => {
+                points.iter().flatten().for_each(|p| grow([p[0], p[1], p[2]], p[3]))
+            }
+        }
+    }
+    extent
+}
 
 /// Embree's query records for [`Scene::intersect_all`] and
 /// [`Scene::occluded_all`], kept between batches.
@@ -50,33 +67,108 @@ pub struct Scene {
     pub has_motion: bool,
     /// A bound on |p| over the scene, for ray offsets.
     pub extent: f32,
+    /// Placed copies of objects (pbrt's `ObjectInstance`).
+    instances: Vec<Instance>,
+    /// Each object's shapes, a range of `shapes` after the top-level ones.
+    objects: Vec<std::ops::Range<u32>>,
     bvh: Bvh,
 }
 
+/// What a scene is built from (see [`Scene`]'s fields).
+pub struct Parts {
+    /// A name for messages.
+    pub name: String,
+    /// The camera.
+    pub camera: Camera,
+    /// Longest path, in bounces.
+    pub max_depth: u32,
+    /// Top-level shapes, then the objects' shapes (see [`Instancing`]).
+    pub shapes: Vec<Shape>,
+    /// Materials.
+    pub materials: Vec<Material>,
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// Scene times of the two motion steps.
+    pub transform_times: [f32; 2],
+    /// Objects and their placements.
+    pub instancing: Instancing,
+}
+
+/// Objects and their placements (pbrt's `ObjectBegin` and `ObjectInstance`).
+#[derive(Debug, Default)]
+pub struct Instancing {
+    /// Each object's shapes: a range of the scene's shapes, all after the
+    /// top-level shapes (which Embree sees directly).
+    pub objects: Vec<std::ops::Range<u32>>,
+    /// (object, object to world) per instance.
+    pub placements: Vec<(u32, Transform)>,
+}
+
+/// One placed object: its transforms, as the hit point needs them.
+#[derive(Debug, Clone)]
+struct Instance {
+    object: u32,
+    to_world: Affine,
+    to_object: Affine,
+}
+
+impl Instance {
+    /// A normal from object to world space (by the inverse transpose).
+    fn normal(&self, n: Vec3) -> Vec3 {
+        let m = &self.to_object.rows;
+        Vec3 {
+            x: m[0][0] * n.x + m[1][0] * n.y + m[2][0] * n.z,
+            y: m[0][1] * n.x + m[1][1] * n.y + m[2][1] * n.z,
+            z: m[0][2] * n.x + m[1][2] * n.y + m[2][2] * n.z,
+        }
+        .normalize()
+    }
+
+    /// A hit found in object space, in world space (the distance is the same).
+    fn to_world(&self, mut hit: SurfaceHit) -> SurfaceHit {
+        hit.p = self.to_world.point(hit.p);
+        hit.ng = self.normal(hit.ng);
+        hit.ns = self.normal(hit.ns);
+        hit
+    }
+}
+
 impl Scene {
-    /// A scene of these parts (see the fields), with its BVH and light distribution built.
-    pub fn build(
-        name: String,
-        camera: Camera,
-        max_depth: u32,
-        shapes: Vec<Shape>,
-        materials: Vec<Material>,
-        lights: Vec<Light>,
-        transform_times: [f32; 2],
-    ) -> Result<Scene, EmbreeError> {
-        let primitives: Vec<_> = shapes.iter().map(|s| s.geometry.primitives()).collect();
-        let bvh = Bvh::build(&primitives)?;
-        drop(primitives);
-        let mut extent = 0f32;
-        for s in &shapes {
-            let mut grow = |p: [f32; 3], r: f32| extent = extent.max(p[0].abs().max(p[1].abs()).max(p[2].abs()) + r);
-            match &s.geometry {
-                shape::Geometry::Mesh { positions, .. } => positions.iter().flatten().for_each(|p| grow(*p, 0.0)),
-                shape::Geometry::Sphere { steps, .. } => steps.iter().for_each(|s| grow([s[0], s[1], s[2]], s[3])),
-                shape::Geometry::Curves { points, .. } => {
-                    points.iter().flatten().for_each(|p| grow([p[0], p[1], p[2]], p[3]))
-                }
-            }
+    /// A scene of these parts, with its BVH and light distribution built.
+    pub fn build(parts: Parts) -> Result<Scene, EmbreeError> {
+        let Parts { name, camera, max_depth, shapes, materials, lights, transform_times, instancing } = parts;
+        let Instancing { objects, placements } = instancing;
+        let top_level = objects.first().map_or(shapes.len(), |r| r.start as usize);
+        let primitives: Vec<_> = shapes[..top_level].iter().map(|s| s.geometry.primitives()).collect();
+        let prototypes: Vec<Vec<_>> = objects
+            .iter()
+            .map(|r| shapes[r.start as usize..r.end as usize].iter().map(|s| s.geometry.primitives()).collect())
+            .collect();
+        let embree_placements: Vec<Placement> = placements
+            .iter()
+            .map(|(object, t)| Placement { prototype: *object, transform: Affine::new(t).rows })
+            .collect();
+        let bvh = Bvh::build(&primitives, &prototypes, &embree_placements)?;
+        drop((primitives, prototypes));
+        // A bound on |p|: the top-level shapes', then each instance's: its
+        // object's bound (about the object's origin) moved and stretched into place.
+        let mut extent = bound(&shapes[..top_level]);
+        let instances: Vec<Instance> = placements
+            .iter()
+            .map(|(object, t)| Instance {
+                object: *object,
+                to_world: Affine::new(t),
+                to_object: Affine::new(&t.inverse()),
+            })
+            .collect();
+        let object_bounds: Vec<f32> =
+            objects.iter().map(|r| bound(&shapes[r.start as usize..r.end as usize])).collect();
+        for i in &instances {
+            let centre = i.to_world.point(Vec3::ZERO);
+            let axis = |k: usize| i.to_world.vector(Vec3::from_array(std::array::from_fn(|j| (j == k) as u8 as f32)));
+            let stretch = (0..3).map(|k| axis(k).length()).fold(0f32, f32::max);
+            let reach = object_bounds[i.object as usize] * 3f32.sqrt() * stretch;
+            extent = extent.max(centre.x.abs().max(centre.y.abs()).max(centre.z.abs()) + reach);
         }
         let has_motion = shapes.iter().any(|s| s.geometry.moves()) && camera.shutter[0] != camera.shutter[1];
         let environment = lights.iter().position(Light::is_environment).map(|i| i as u32);
@@ -111,8 +203,15 @@ impl Scene {
             transform_times,
             has_motion,
             extent,
+            instances,
+            objects,
             bvh,
         })
+    }
+
+    /// Whether the scene places objects by instancing.
+    pub fn has_instances(&self) -> bool {
+        !self.instances.is_empty()
     }
 
     /// Image width.
@@ -159,13 +258,23 @@ impl Scene {
         hits.clear();
         hits.extend(rays.iter().zip(queries.iter()).zip(&buffers.hits).map(|((ray, query), hit)| {
             let hit = hit.as_ref()?;
-            Some(self.shapes[hit.geometry as usize].geometry.surface(
-                hit,
-                ray.origin,
-                ray.dir,
-                query.time,
-                hit.geometry,
-            ))
+            Some(match hit.instance {
+                None => self.shapes[hit.geometry as usize].geometry.surface(
+                    hit,
+                    ray.origin,
+                    ray.dir,
+                    query.time,
+                    hit.geometry,
+                ),
+                Some(k) => {
+                    // Found in the object's own space: the ray is taken there, the hit brought back.
+                    let instance = &self.instances[k as usize];
+                    let shape = self.objects[instance.object as usize].start + hit.geometry;
+                    let (origin, dir) = (instance.to_object.point(ray.origin), instance.to_object.vector(ray.dir));
+                    let local = self.shapes[shape as usize].geometry.surface(hit, origin, dir, query.time, shape);
+                    instance.to_world(local)
+                }
+            })
         }));
     }
 
