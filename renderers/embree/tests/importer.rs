@@ -209,7 +209,10 @@ fn every_error_names_the_file_line_and_problem() {
     error_at("Material \"conductor\" \"spectrum eta\" \"metal-Xx-eta\"\n", 1, "unknown named spectrum");
     error_at("Texture \"t\" \"spectrum\" \"marble\"\n", 1, "unsupported texture class \"marble\"");
     error_at("Texture \"t\" \"spectrum\" \"imagemap\" \"string filename\" \"none.png\"\n", 1, "none.png");
-    error_at("Shape \"disk\"\n", 1, "unsupported shape \"disk\"");
+    error_at("Shape \"hyperboloid\"\n", 1, "unsupported shape \"hyperboloid\"");
+    error_at("Shape \"disk\" \"float innerradius\" 2\n", 1, "innerradius");
+    error_at("Shape \"bilinearmesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0 1 1 0 2 2 2]\n", 1, "needs \"integer indices\"");
+    error_at("Shape \"loopsubdiv\" \"integer levels\" 20 \"point3 P\" [0 0 0 1 0 0 0 1 0]\n", 1, "levels");
     error_at("Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0 1 1 0]\n", 1, "needs \"integer indices\"");
     error_at(
         "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 3]\n",

@@ -9,6 +9,7 @@
 
 use super::params::{ParamSet, SpectrumValue};
 use super::parser::Parser;
+use super::tessellate::{self, TriMesh};
 use super::{ply, Loc, SceneError};
 use crate::math::{Transform, Vec3};
 use crate::scene::camera::Camera;
@@ -20,6 +21,97 @@ use crate::scene::texture::{read_image, Encoding, Texture, UvMapping, Wrap};
 use crate::scene::{Instancing, Parts, Scene};
 use std::path::Path;
 use std::sync::Arc;
+
+/// Vertex indices in groups of `n` (pbrt allows leaving them out when there is exactly one group).
+fn index_groups<const N: usize>(
+    params: &ParamSet,
+    vertices: usize,
+    loc: &Loc,
+    what: &str,
+) -> Result<Vec<[u32; N]>, SceneError> {
+    let indices = match params.ints("indices")? {
+        Some(i) => i,
+        None if vertices == N => (0..N as i64).collect(),
+        None => {
+            return Err(SceneError::at(
+                loc,
+                format!("{what} needs \"integer indices\" (unless it has exactly {N} vertices)"),
+            ))
+        }
+    };
+    if indices.len() % N != 0 || indices.is_empty() {
+        return Err(
+            params.invalid("indices", &format!("needs a positive multiple of {N} values, got {}", indices.len()))
+        );
+    }
+    if let Some(bad) = indices.iter().find(|i| **i < 0 || **i as usize >= vertices) {
+        return Err(params.invalid("indices", &format!("has {bad}, outside 0..{vertices}")));
+    }
+    Ok(indices.chunks_exact(N).map(|c| std::array::from_fn(|k| c[k] as u32)).collect())
+}
+
+/// The shapes made of triangles here: disk, cylinder, bilinear patches, Loop subdivision surfaces.
+fn tessellated(ty: &str, params: &ParamSet, loc: &Loc) -> Result<TriMesh, SceneError> {
+    let positive = |name: &str, default: f32| -> Result<f32, SceneError> {
+        let v = params.float(name, default)?;
+        if v > 0.0 {
+            Ok(v)
+        } else {
+            Err(params.invalid(name, "must be positive"))
+        }
+    };
+    let phi_max = || -> Result<f32, SceneError> {
+        let phi = params.float("phimax", 360.0)?;
+        if phi > 0.0 && phi <= 360.0 {
+            Ok(phi.to_radians())
+        } else {
+            Err(params.invalid("phimax", "must be in (0, 360] degrees"))
+        }
+    };
+    let points = |what: &str| {
+        params.triples("P", &["point3"])?.ok_or_else(|| SceneError::at(loc, format!("{what} needs \"point3 P\"")))
+    };
+    Ok(match ty {
+        "disk" => {
+            let radius = positive("radius", 1.0)?;
+            let inner = params.float("innerradius", 0.0)?;
+            if !(0.0..radius).contains(&inner) {
+                return Err(params.invalid("innerradius", "must be at least 0 and less than the radius"));
+            }
+            tessellate::disk(params.float("height", 0.0)?, radius, inner, phi_max()?)
+        }
+        "cylinder" => {
+            let (z0, z1) = (params.float("zmin", -1.0)?, params.float("zmax", 1.0)?);
+            if z0 == z1 {
+                return Err(params.invalid("zmax", "must differ from zmin"));
+            }
+            tessellate::cylinder(positive("radius", 1.0)?, z0.min(z1), z0.max(z1), phi_max()?)
+        }
+        "bilinearmesh" => {
+            let p = points("bilinearmesh")?;
+            let patches = index_groups::<4>(params, p.len(), loc, "bilinearmesh")?;
+            let normals = params.triples("N", &["normal", "normal3"])?;
+            let uvs = params.pairs("uv")?;
+            if normals.as_ref().is_some_and(|n| n.len() != p.len()) {
+                return Err(params.invalid("N", "needs one normal per vertex"));
+            }
+            if uvs.as_ref().is_some_and(|u| u.len() != p.len()) {
+                return Err(params.invalid("uv", "needs one pair per vertex"));
+            }
+            tessellate::bilinear(&p, &patches, normals.as_deref(), uvs.as_deref(), 16)
+        }
+        "loopsubdiv" => {
+            let p = points("loopsubdiv")?;
+            let triangles = index_groups::<3>(params, p.len(), loc, "loopsubdiv")?;
+            let levels = params.int("levels", 3)?;
+            if !(0..=8).contains(&levels) {
+                return Err(params.invalid("levels", "must be between 0 and 8"));
+            }
+            tessellate::loop_subdivision(&p, &triangles, levels as u32)
+        }
+        _ => unreachable!("the caller passes tessellated shapes only"),
+    })
+}
 
 impl Parser {
     fn texture_ref(
@@ -325,39 +417,23 @@ impl Parser {
         let steps: Vec<Transform> = if moving { vec![t0, t1] } else { vec![t0] };
         let flip = self.state.reverse_orientation ^ t0.swaps_handedness();
         let geometry = match ty {
-            "trianglemesh" | "plymesh" => {
+            "trianglemesh" | "plymesh" | "loopsubdiv" | "bilinearmesh" | "disk" | "cylinder" => {
                 let (positions, indices, normals, uvs) = if ty == "plymesh" {
                     let file = params
                         .string("filename")?
                         .ok_or_else(|| SceneError::at(loc, "plymesh needs \"string filename\""))?;
                     let m = ply::read(&self.resolve(&file)).map_err(|e| SceneError::at(loc, e))?;
                     (m.positions, m.indices, m.normals, m.uvs)
+                } else if ty != "trianglemesh" {
+                    let m = tessellated(ty, params, loc)?;
+                    (m.positions, m.indices, m.normals, m.uvs)
                 } else {
                     let p = params
                         .triples("P", &["point3", "point"])?
                         .ok_or_else(|| SceneError::at(loc, "trianglemesh needs \"point3 P\""))?;
-                    let indices = match params.ints("indices")? {
-                        Some(i) => i,
-                        None if p.len() == 3 => vec![0, 1, 2],
-                        None => {
-                            return Err(SceneError::at(
-                                loc,
-                                "trianglemesh needs \"integer indices\" (unless it has exactly 3 vertices)",
-                            ))
-                        }
-                    };
-                    if indices.len() % 3 != 0 || indices.is_empty() {
-                        return Err(params.invalid(
-                            "indices",
-                            &format!("needs a positive multiple of 3 values, got {}", indices.len()),
-                        ));
-                    }
-                    if let Some(bad) = indices.iter().find(|i| **i < 0 || **i as usize >= p.len()) {
-                        return Err(params.invalid("indices", &format!("has {bad}, outside 0..{}", p.len())));
-                    }
+                    let indices = index_groups::<3>(params, p.len(), loc, "trianglemesh")?;
                     let n = params.triples("N", &["normal", "normal3"])?;
                     let uv = params.pairs("uv")?;
-                    let indices = indices.chunks_exact(3).map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]).collect();
                     (p, indices, n, uv)
                 };
                 if normals.as_ref().is_some_and(|n| n.len() != positions.len()) {
@@ -464,7 +540,9 @@ impl Parser {
             other => {
                 return Err(SceneError::at(
                     loc,
-                    format!("unsupported shape {other:?} (supported: trianglemesh, plymesh, sphere, curve)"),
+                    format!(
+                        "unsupported shape {other:?} (supported: trianglemesh, plymesh, sphere, curve, disk, cylinder, bilinearmesh, loopsubdiv)"
+                    ),
                 ))
             }
         };

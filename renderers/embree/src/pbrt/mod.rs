@@ -6,6 +6,7 @@
 //! - [`parser`]: directives and the graphics state they change.
 //! - `build`: the scene they build (shapes, materials, textures, camera).
 //! - [`ply`]: meshes for `plymesh`.
+//! - [`tessellate`]: `disk`, `cylinder`, `bilinearmesh`, `loopsubdiv` as triangles.
 //! - `upgrade`: pbrt-v3 forms read as pbrt-v4's `--upgrade` converts them.
 //!
 //! Supported: `Include`/`Import`; `LookAt`, `Translate`, `Scale`,
@@ -18,7 +19,8 @@
 //! instances); `Texture` (`imagemap`, `checkerboard`,
 //! `constant`, `scale`); `Material`, `MakeNamedMaterial`, `NamedMaterial`
 //! (`diffuse`, `conductor`, `dielectric`, `coateddiffuse`); `Shape`
-//! (`trianglemesh`, `plymesh`, `sphere`, `curve`); `AreaLightSource
+//! (`trianglemesh`, `plymesh`, `sphere`, `curve`, and as triangles `disk`,
+//! `cylinder`, `bilinearmesh`, `loopsubdiv`); `AreaLightSource
 //! "diffuse"`; `LightSource` `"infinite"` (constant, or a square image in
 //! pbrt-v4's equal-area mapping), `"point"`, `"spot"`, `"distant"`.
 //! pbrt-v3 files are read as pbrt-v4's upgrade converts them (see
@@ -29,6 +31,7 @@ pub mod lexer;
 pub mod params;
 pub mod parser;
 pub mod ply;
+pub mod tessellate;
 mod upgrade;
 
 use std::fmt;
