@@ -210,10 +210,14 @@ impl Path {
             }
         }
         self.alive = false;
-        let hit = hit?;
+        let mut hit = hit?;
         let wo = -ray.dir;
         let shape = &scene.shapes[hit.shape as usize];
         let material = &scene.materials[shape.material as usize];
+        if let Some(bump) = &scene.bumps[shape.material as usize] {
+            let tangents = scene.tangents(&hit, ray.time);
+            bump.apply(&mut hit, tangents);
+        }
         let bsdf = material.bsdf(hit.uv);
         let depth = self.depth;
         // Geometry features.

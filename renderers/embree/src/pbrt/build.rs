@@ -15,7 +15,7 @@ use crate::math::{Transform, Vec3};
 use crate::scene::camera::Camera;
 use crate::scene::environment::EnvironmentMap;
 use crate::scene::light::{area_cdf, Light, LightTriangle};
-use crate::scene::material::{ConductorIndex, Material, Roughness};
+use crate::scene::material::{Bump, ConductorIndex, Material, Roughness};
 use crate::scene::shape::{Geometry, Shape};
 use crate::scene::texture::{read_image, Encoding, Texture, UvMapping, Wrap};
 use crate::scene::{Instancing, Parts, Scene};
@@ -248,6 +248,24 @@ impl Parser {
             }
         };
         Ok(Roughness { u: get("uroughness")?, v: get("vroughness")?, remap: params.bool("remaproughness", true)? })
+    }
+
+    /// A material's bump map (`"texture displacement"`) or normal map (`"string normalmap"`).
+    pub(super) fn bump(&self, params: &ParamSet, loc: &Loc) -> Result<Option<Bump>, SceneError> {
+        let height = match params.float_or_texture("displacement")? {
+            Some(v) => Some(self.texture_ref(v, true, params, "displacement")?),
+            None => None,
+        };
+        let normal_map = params.string("normalmap")?;
+        Ok(match (height, normal_map) {
+            (Some(_), Some(_)) => return Err(params.invalid("normalmap", "cannot be given with a displacement")),
+            (Some(h), None) => Some(Bump::Height(h)),
+            (None, Some(file)) => {
+                let image = read_image(&self.resolve(&file), Encoding::Linear).map_err(|e| SceneError::at(loc, e))?;
+                Some(Bump::NormalMap(Arc::new(image)))
+            }
+            (None, None) => None,
+        })
     }
 
     pub(super) fn material(&self, ty: &str, params: &ParamSet, loc: &Loc) -> Result<Material, SceneError> {
@@ -706,6 +724,7 @@ impl Parser {
             max_depth,
             shapes,
             materials: self.materials,
+            bumps: self.bumps,
             lights: self.lights,
             transform_times: self.transform_times,
             instancing,

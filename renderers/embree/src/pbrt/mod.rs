@@ -18,7 +18,8 @@
 //! `TransformBegin`/`End`; `ObjectBegin`/`End`, `ObjectInstance` (Embree
 //! instances); `Texture` (`imagemap`, `checkerboard`,
 //! `constant`, `scale`); `Material`, `MakeNamedMaterial`, `NamedMaterial`
-//! (`diffuse`, `conductor`, `dielectric`, `coateddiffuse`); `Shape`
+//! (`diffuse`, `conductor`, `dielectric`, `coateddiffuse`; each with a bump
+//! map `"texture displacement"` or a `"string normalmap"`); `Shape`
 //! (`trianglemesh`, `plymesh`, `sphere`, `curve`, and as triangles `disk`,
 //! `cylinder`, `bilinearmesh`, `loopsubdiv`); `AreaLightSource
 //! "diffuse"`; `LightSource` `"infinite"` (constant, or a square image in

@@ -12,7 +12,7 @@ use super::params::{ParamSet, SpectrumValue, Values};
 use super::{Loc, SceneError};
 use crate::math::{Transform, Vec3};
 use crate::scene::light::Light;
-use crate::scene::material::Material;
+use crate::scene::material::{Bump, Material};
 use crate::scene::shape::Shape;
 use crate::scene::texture::Texture;
 use crate::scene::Scene;
@@ -60,6 +60,8 @@ pub(super) struct Parser {
     pub(super) float_textures: HashMap<String, Arc<Texture>>,
     named_materials: HashMap<String, u32>,
     pub(super) materials: Vec<Material>,
+    /// Each material's bump or normal map.
+    pub(super) bumps: Vec<Option<Bump>>,
     pub(super) shapes: Vec<Shape>,
     pub(super) lights: Vec<Light>,
     include_depth: u32,
@@ -275,6 +277,7 @@ impl Parser {
             named_materials: HashMap::new(),
             // pbrt's default material.
             materials: vec![Material::Diffuse { reflectance: Arc::new(Texture::Constant(Vec3::splat(0.5))) }],
+            bumps: vec![None],
             shapes: Vec::new(),
             lights: Vec::new(),
             include_depth: 0,
@@ -591,8 +594,10 @@ impl Parser {
                 let mut params = self.params(c, format!("Material {ty:?}"), loc)?;
                 let v4 = self.upgraded(super::upgrade::material(&ty, &mut params)?, loc);
                 let m = self.material(&v4, &params, loc).map_err(|e| upgraded_from(e, &ty, &v4))?;
+                let bump = self.bump(&params, loc)?;
                 params.check_unused()?;
                 self.materials.push(m);
+                self.bumps.push(bump);
                 self.state.material = self.materials.len() as u32 - 1;
             }
             "MakeNamedMaterial" => {
@@ -604,8 +609,10 @@ impl Parser {
                     .ok_or_else(|| SceneError::at(loc, "MakeNamedMaterial needs \"string type\""))?;
                 let v4 = self.upgraded(super::upgrade::material(&ty, &mut params)?, loc);
                 let m = self.material(&v4, &params, loc).map_err(|e| upgraded_from(e, &ty, &v4))?;
+                let bump = self.bump(&params, loc)?;
                 params.check_unused()?;
                 self.materials.push(m);
+                self.bumps.push(bump);
                 self.named_materials.insert(material_name, self.materials.len() as u32 - 1);
             }
             "NamedMaterial" => {

@@ -115,3 +115,50 @@ impl Material {
         }
     }
 }
+
+/// A perturbation of the shading normal, as pbrt's materials take it: a
+/// bump map (`"texture displacement"`) or a normal map (`"string normalmap"`).
+#[derive(Debug, Clone)]
+pub enum Bump {
+    /// Heights along the normal, a float texture (pbrt's `BumpMap`).
+    Height(Arc<Texture>),
+    /// Normals in the tangent frame (∂p/∂u, n), RGB in [0, 1] for [−1, 1]
+    /// (pbrt's `NormalMap`: bilinear, repeating, v flipped).
+    NormalMap(Arc<crate::scene::texture::ImageData>),
+}
+
+impl Bump {
+    /// Perturbs `hit`'s shading normal, given its tangents ∂p/∂u and ∂p/∂v;
+    /// it stays on the side of the unperturbed one.
+    pub fn apply(&self, hit: &mut crate::scene::shape::SurfaceHit, (dpdu, dpdv): (Vec3, Vec3)) {
+        let n = hit.ns;
+        let perturbed = match self {
+            Bump::Height(texture) => {
+                // Without ray differentials pbrt's step is 0.0005 in u and v;
+                // the displaced point's tangents give the normal.
+                const DELTA: f32 = 0.0005;
+                let [u, v] = hit.uv;
+                let height = texture.eval_float(hit.uv);
+                let du = (texture.eval_float([u + DELTA, v]) - height) / DELTA;
+                let dv = (texture.eval_float([u, v + DELTA]) - height) / DELTA;
+                (dpdu + n * du).cross(dpdv + n * dv)
+            }
+            Bump::NormalMap(image) => {
+                let [u, v] = hit.uv;
+                let c = crate::scene::texture::bilinear(image, u, 1.0 - v, crate::scene::texture::Wrap::Repeat);
+                let local = (c * 2.0 - Vec3::ONE).normalize();
+                // The frame: x along ∂p/∂u (made perpendicular to n), z the normal.
+                let x = (dpdu - n * n.dot(dpdu)).normalize();
+                if x == Vec3::ZERO {
+                    return;
+                }
+                let y = n.cross(x);
+                x * local.x + y * local.y + n * local.z
+            }
+        }
+        .normalize();
+        if perturbed.is_finite() && perturbed != Vec3::ZERO {
+            hit.ns = perturbed.face_forward(n);
+        }
+    }
+}

@@ -15,7 +15,7 @@ use crate::math::{Affine, Transform};
 use camera::{Camera, Ray};
 use fbksd_core::SceneInfo;
 use light::Light;
-use material::Material;
+use material::{Bump, Material};
 use shape::{Shape, SurfaceHit};
 
 /// A bound on |p| over `shapes`' points (radii included).
@@ -54,6 +54,8 @@ pub struct Scene {
     pub shapes: Vec<Shape>,
     /// Materials.
     pub materials: Vec<Material>,
+    /// Each material's bump or normal map.
+    pub bumps: Vec<Option<Bump>>,
     /// Lights.
     pub lights: Vec<Light>,
     /// The environment light, if any (index into `lights`).
@@ -86,6 +88,8 @@ pub struct Parts {
     pub shapes: Vec<Shape>,
     /// Materials.
     pub materials: Vec<Material>,
+    /// Each material's bump or normal map.
+    pub bumps: Vec<Option<Bump>>,
     /// Lights.
     pub lights: Vec<Light>,
     /// Scene times of the two motion steps.
@@ -136,7 +140,7 @@ impl Instance {
 impl Scene {
     /// A scene of these parts, with its BVH and light distribution built.
     pub fn build(parts: Parts) -> Result<Scene, EmbreeError> {
-        let Parts { name, camera, max_depth, shapes, materials, lights, transform_times, instancing } = parts;
+        let Parts { name, camera, max_depth, shapes, materials, bumps, lights, transform_times, instancing } = parts;
         let Instancing { objects, placements } = instancing;
         let top_level = objects.first().map_or(shapes.len(), |r| r.start as usize);
         let primitives: Vec<_> = shapes[..top_level].iter().map(|s| s.geometry.primitives()).collect();
@@ -196,6 +200,7 @@ impl Scene {
             max_depth,
             shapes,
             materials,
+            bumps,
             lights,
             environment,
             light_pmf,
@@ -272,7 +277,7 @@ impl Scene {
                     let shape = self.objects[instance.object as usize].start + hit.geometry;
                     let (origin, dir) = (instance.to_object.point(ray.origin), instance.to_object.vector(ray.dir));
                     let local = self.shapes[shape as usize].geometry.surface(hit, origin, dir, query.time, shape);
-                    instance.to_world(local)
+                    SurfaceHit { instance: Some(k), ..instance.to_world(local) }
                 }
             })
         }));
@@ -290,6 +295,20 @@ impl Scene {
             time: self.embree_time(s.ray.time),
         }));
         self.bvh.occluded_batch(queries, occluded);
+    }
+
+    /// ∂p/∂u and ∂p/∂v at a hit (see [`shape::Geometry::tangents`]), in world space.
+    pub fn tangents(&self, hit: &SurfaceHit, time: f32) -> (Vec3, Vec3) {
+        let geometry = &self.shapes[hit.shape as usize].geometry;
+        let time = self.embree_time(time);
+        match hit.instance {
+            None => geometry.tangents(hit.primitive, hit.p, time),
+            Some(k) => {
+                let instance = &self.instances[k as usize];
+                let (dpdu, dpdv) = geometry.tangents(hit.primitive, instance.to_object.point(hit.p), time);
+                (instance.to_world.vector(dpdu), instance.to_world.vector(dpdv))
+            }
+        }
     }
 
     /// Picks a light with `u` ∈ [0, 1): (index, probability).

@@ -66,6 +66,8 @@ pub struct SurfaceHit {
     pub uv: [f32; 2],
     /// Distance from the ray origin.
     pub t: f32,
+    /// The instance it was found in (an index of the scene's instances), if any.
+    pub instance: Option<u32>,
     /// Which shape.
     pub shape: u32,
     /// Which primitive of it.
@@ -105,6 +107,53 @@ impl Geometry {
             Geometry::Mesh { positions, indices, .. } => indices.iter().map(|i| triangle_area(&positions[0], i)).sum(),
             Geometry::Sphere { steps, .. } => 4.0 * std::f32::consts::PI * steps[0][3] * steps[0][3],
             Geometry::Curves { .. } => 0.0,
+        }
+    }
+
+    /// ∂p/∂u and ∂p/∂v of the texture parameterisation at point `p` of
+    /// primitive `primitive` (for bump and normal maps; computed only for
+    /// the materials that have them).
+    pub fn tangents(&self, primitive: u32, p: Vec3, time: f32) -> (Vec3, Vec3) {
+        match self {
+            Geometry::Mesh { positions, indices, uvs, .. } => {
+                let idx = indices[primitive as usize];
+                let vertex = |k: usize| {
+                    let i = idx[k] as usize;
+                    match positions.len() {
+                        1 => Vec3::from_array(positions[0][i]),
+                        _ => Vec3::from_array(positions[0][i]).lerp(Vec3::from_array(positions[1][i]), time),
+                    }
+                };
+                let (p0, p1, p2) = (vertex(0), vertex(1), vertex(2));
+                let Some(uv) = uvs else {
+                    // pbrt's default parameterisation: p = p0 + u(p1 − p0) + v(p2 − p1).
+                    return (p1 - p0, p2 - p1);
+                };
+                let [a, b, c] = idx.map(|i| uv[i as usize]);
+                // Solve for ∂p/∂u, ∂p/∂v from the edges and their uv differences.
+                let (duv02, duv12) = ([a[0] - c[0], a[1] - c[1]], [b[0] - c[0], b[1] - c[1]]);
+                let (dp02, dp12) = (p0 - p2, p1 - p2);
+                let det = duv02[0] * duv12[1] - duv02[1] * duv12[0];
+                if det.abs() < 1e-12 {
+                    let f = crate::math::Frame::from_normal((p1 - p0).cross(p2 - p0).normalize());
+                    return (f.to_world(vec3(1.0, 0.0, 0.0)), f.to_world(vec3(0.0, 1.0, 0.0)));
+                }
+                let inv = 1.0 / det;
+                ((dp02 * duv12[1] - dp12 * duv02[1]) * inv, (dp12 * duv02[0] - dp02 * duv12[0]) * inv)
+            }
+            Geometry::Sphere { steps, to_object, .. } => {
+                let s = match steps.len() {
+                    1 => steps[0],
+                    _ => std::array::from_fn(|i| steps[0][i] + (steps[1][i] - steps[0][i]) * time),
+                };
+                let (center, radius) = (vec3(s[0], s[1], s[2]), s[3]);
+                let n = (p - center).normalize();
+                // Around the sphere's axis (u), and along its meridian towards the +z pole (v).
+                let axis = to_object.inverse().vector(vec3(0.0, 0.0, 1.0)).normalize();
+                let meridian = (axis - n * n.dot(axis)).normalize();
+                (axis.cross(p - center) * (2.0 * std::f32::consts::PI), meridian * (std::f32::consts::PI * radius))
+            }
+            Geometry::Curves { .. } => (Vec3::ZERO, Vec3::ZERO),
         }
     }
 
@@ -198,7 +247,7 @@ impl Geometry {
                 (origin + dir * hit.t, ng, ng, hit.uv)
             }
         };
-        SurfaceHit { p, ng, ns, uv, t: hit.t, shape, primitive: hit.primitive }
+        SurfaceHit { p, ng, ns, uv, t: hit.t, shape, primitive: hit.primitive, instance: None }
     }
 }
 

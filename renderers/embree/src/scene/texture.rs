@@ -125,7 +125,7 @@ impl Texture {
     }
 }
 
-fn bilinear(image: &ImageData, s: f32, t: f32, wrap: Wrap) -> Vec3 {
+pub(crate) fn bilinear(image: &ImageData, s: f32, t: f32, wrap: Wrap) -> Vec3 {
     let (w, h) = (image.width as i64, image.height as i64);
     let x = s * w as f32 - 0.5;
     let y = t * h as f32 - 0.5;
