@@ -212,9 +212,9 @@ impl Path {
         self.alive = false;
         let mut hit = hit?;
         let wo = -ray.dir;
-        let shape = &scene.shapes[hit.shape as usize];
-        let material = &scene.materials[shape.material as usize];
-        if let Some(bump) = &scene.bumps[shape.material as usize] {
+        let material_index = scene.material_at(scene.shapes[hit.shape as usize].material, &hit, wo);
+        let material = &scene.materials[material_index as usize];
+        if let Some(bump) = &scene.bumps[material_index as usize] {
             let tangents = scene.tangents(&hit, ray.time);
             bump.apply(&mut hit, tangents);
         }

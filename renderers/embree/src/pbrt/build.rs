@@ -7,7 +7,7 @@
 //! parser only hands over a parameter list, the current graphics state and
 //! where it came from.
 
-use super::params::{ParamSet, SpectrumValue};
+use super::params::{ParamSet, SpectrumValue, Values};
 use super::parser::Parser;
 use super::tessellate::{self, TriMesh};
 use super::{ply, Loc, SceneError};
@@ -310,14 +310,26 @@ impl Parser {
                     internal_reflectance: crate::bsdf::coated::Coated::internal_reflectance(eta),
                 }
             }
-            "" | "none" | "interface" => {
-                return Err(SceneError::at(loc, "interface materials (participating media) are not supported"))
+            "" | "none" | "interface" => Material::Interface,
+            "mix" => {
+                let names = match params.get("materials").map(|p| &p.values) {
+                    Some(Values::Strs(names)) if names.len() == 2 => names.clone(),
+                    _ => return Err(params.invalid("materials", "must name two materials")),
+                };
+                params.ignore("materials");
+                let index = |name: &String| {
+                    self.named_materials
+                        .get(name)
+                        .copied()
+                        .ok_or_else(|| params.invalid("materials", &format!("names {name:?}, which is not defined")))
+                };
+                Material::Mix { materials: [index(&names[0])?, index(&names[1])?], amount: self.float_texture(params, "amount", 0.5)? }
             }
             other => {
                 return Err(SceneError::at(
                     loc,
                     format!(
-                        "unsupported material {other:?} (supported: diffuse, conductor, dielectric, coateddiffuse)"
+                        "unsupported material {other:?} (supported: diffuse, conductor, dielectric, coateddiffuse, mix, interface)"
                     ),
                 ))
             }
@@ -603,6 +615,13 @@ impl Parser {
                 self.lights.push(l);
                 light = Some(self.lights.len() as u32 - 1);
             }
+        }
+        if matches!(self.materials[self.state.material as usize], Material::Interface) {
+            if light.is_some() {
+                return Err(SceneError::at(loc, "an area light on a shape with an interface material"));
+            }
+            self.warn(loc, "a shape with an interface material left out: it bounds a participating medium, and media are not rendered");
+            return Ok(());
         }
         let shape = Shape { geometry, material: self.state.material, light };
         match self.object {

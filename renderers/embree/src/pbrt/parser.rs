@@ -58,7 +58,7 @@ pub(super) struct Parser {
     pub(super) options: Options,
     pub(super) textures: HashMap<String, Arc<Texture>>,
     pub(super) float_textures: HashMap<String, Arc<Texture>>,
-    named_materials: HashMap<String, u32>,
+    pub(super) named_materials: HashMap<String, u32>,
     pub(super) materials: Vec<Material>,
     /// Each material's bump or normal map.
     pub(super) bumps: Vec<Option<Bump>>,

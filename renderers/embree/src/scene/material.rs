@@ -71,6 +71,17 @@ pub enum Material {
         /// See [`Coated::internal_reflectance`] (computed once).
         internal_reflectance: f32,
     },
+    /// pbrt `mix`: at each point one of two materials, the second with
+    /// probability `amount` (chosen by [`crate::scene::Scene::material_at`]).
+    Mix {
+        /// The two materials (indices into the scene's materials).
+        materials: [u32; 2],
+        /// The probability of the second.
+        amount: Arc<Texture>,
+    },
+    /// pbrt `interface`: the boundary of a participating medium, itself
+    /// invisible. Media are not rendered, so its shapes are left out.
+    Interface,
 }
 
 impl Material {
@@ -89,6 +100,8 @@ impl Material {
             Material::Dielectric { eta, roughness } => {
                 Bsdf::Dielectric(Dielectric { distribution: roughness.distribution(uv), eta: *eta })
             }
+            // Resolved before shading (a mix), or never hit (an interface): black if it were.
+            Material::Mix { .. } | Material::Interface => Bsdf::Diffuse(Diffuse { reflectance: Vec3::ZERO }),
             Material::CoatedDiffuse { reflectance, roughness, eta, internal_reflectance } => Bsdf::Coated(Coated {
                 distribution: roughness.distribution(uv),
                 eta: *eta,
@@ -112,6 +125,7 @@ impl Material {
                 _ => unreachable!("a conductor's BSDF is a conductor"),
             },
             Material::Dielectric { .. } => Vec3::ONE,
+            Material::Mix { .. } | Material::Interface => Vec3::ZERO,
         }
     }
 }

@@ -311,6 +311,29 @@ impl Scene {
         }
     }
 
+    /// The material at a hit seen from `wo`: `index`, or for a mix the
+    /// material it picks there. The pick is a hash of the point and the
+    /// direction (as pbrt's), so a sample replays, and is the second
+    /// material with probability `amount`.
+    pub fn material_at(&self, mut index: u32, hit: &SurfaceHit, wo: Vec3) -> u32 {
+        // Named materials are defined before use, so a chain of mixes ends.
+        while let Material::Mix { materials, amount } = &self.materials[index as usize] {
+            let a = amount.eval_float(hit.uv);
+            let bits = [hit.p.x, hit.p.y, hit.p.z, wo.x, wo.y, wo.z]
+                .iter()
+                .fold(index as u64, |h, v| fbksd_renderer::sampler::mix(h ^ v.to_bits() as u64));
+            let u = (bits >> 40) as f32 / (1u64 << 24) as f32;
+            index = if a <= 0.0 {
+                materials[0]
+            } else if a >= 1.0 || u < a {
+                materials[1]
+            } else {
+                materials[0]
+            };
+        }
+        index
+    }
+
     /// Picks a light with `u` ∈ [0, 1): (index, probability).
     #[inline]
     pub fn choose_light(&self, u: f32) -> Option<(u32, f32)> {
