@@ -251,6 +251,16 @@ fn every_error_names_the_file_line_and_problem() {
 }
 
 #[test]
+fn a_gzipped_include_is_read() {
+    use std::io::Write;
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(TRI.as_bytes()).unwrap();
+    let s = scene(&format!("{CAMERA}WorldBegin\nInclude \"tri.pbrt.gz\"\n"), &[("tri.pbrt.gz", &gz.finish().unwrap())])
+        .unwrap();
+    assert_eq!(mesh(&s, 0)[0].len(), 3);
+}
+
+#[test]
 fn errors_in_options_and_structure_name_their_place_too() {
     let whole = |text: &str| scene(text, &[]).err().unwrap();
     assert!(whole("WorldBegin\n").contains("no Camera"));

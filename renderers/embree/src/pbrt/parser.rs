@@ -175,6 +175,17 @@ impl Cursor {
     }
 }
 
+/// A scene file's text; `.gz` files (pbrt reads them too) are decompressed.
+fn read_text(path: &Path) -> std::io::Result<String> {
+    if path.extension().is_some_and(|e| e == "gz") {
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(std::fs::File::open(path)?), &mut text)?;
+        Ok(text)
+    } else {
+        std::fs::read_to_string(path)
+    }
+}
+
 /// How a directive counts in a survey: its name, and its type for those that have one.
 fn used_as(directive: &str, c: &Cursor) -> String {
     let string = |k: usize| match c.tokens.get(c.pos + k) {
@@ -341,7 +352,7 @@ impl Parser {
     }
 
     fn file(&mut self, path: &Path, from: Option<&Loc>) -> Result<(), SceneError> {
-        let src = std::fs::read_to_string(path).map_err(|e| {
+        let src = read_text(path).map_err(|e| {
             let message = format!("cannot read {}: {e}", path.display());
             match from {
                 Some(loc) => SceneError::at(loc, message),
