@@ -56,6 +56,72 @@ fn the_thesis_example_b1_and_the_python_box_filter_match_the_rust_box_filter() {
 }
 
 #[test]
+fn a_renderer_written_in_python_serves_exact_samples_to_a_technique() {
+    // The ramp renderer's colour is where each sample lies: red x / width,
+    // green y / height. The box filter's pixel means are then each pixel's
+    // centre, up to the stratified jitter (4 × 4 strata at 16 spp).
+    let dir = tempfile::tempdir().unwrap();
+    let scene = analytic_scene(dir.path(), "ramp", 24, 10);
+    let results = dir.path().join("results");
+    let output = fbksd_run(&[
+        "-t".into(),
+        format!("box={}", bin("box-filter")),
+        "-r".into(),
+        sdk("python/examples/ramp_renderer.py").display().to_string(),
+        "-s".into(),
+        scene.display().to_string(),
+        "--spp".into(),
+        "1,16".into(),
+        "--results".into(),
+        results.display().to_string(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    for (spp, slack) in [(1, 0.5), (16, 0.5 / 4.0)] {
+        let image = read(&results, "box", "ramp", spp);
+        for y in 0..10 {
+            for x in 0..24 {
+                let p = &image[(y * 24 + x) * 3..][..3];
+                let (cx, cy) = ((x as f32 + 0.5) / 24.0, (y as f32 + 0.5) / 10.0);
+                assert!((p[0] - cx).abs() <= slack / 24.0 + 1e-6, "{spp} spp, pixel ({x}, {y}): red {} vs {cx}", p[0]);
+                assert!(
+                    (p[1] - cy).abs() <= slack / 10.0 + 1e-6,
+                    "{spp} spp, pixel ({x}, {y}): green {} vs {cy}",
+                    p[1]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_python_renderer_that_refuses_a_feature_says_so() {
+    // The ramp renderer computes colour only: asked for DEPTH, the run fails with its message.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = analytic_scene(dir.path(), "ramp", 8, 8);
+    let script = dir.path().join("depth.py");
+    std::fs::write(
+        &script,
+        "#!/usr/bin/env python3\nimport fbksd.client as fc\nc = fc.BenchmarkClient()\nc.set_sample_layout(['COLOR_R', 'DEPTH'])\nc.evaluate_samples(1, lambda t, o: None)\nc.send_result()\n",
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let output = fbksd_run(&[
+        "-t".into(),
+        format!("depth={}", script.display()),
+        "-r".into(),
+        sdk("python/examples/ramp_renderer.py").display().to_string(),
+        "-s".into(),
+        scene.display().to_string(),
+        "--spp".into(),
+        "1".into(),
+        "--results".into(),
+        dir.path().join("results").display().to_string(),
+    ]);
+    let text = format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
+    assert!(text.contains("DEPTH is not computed by the ramp renderer"), "{text}");
+}
+
+#[test]
 fn the_adaptive_python_technique_spends_exactly_its_budget() {
     let dir = tempfile::tempdir().unwrap();
     let scene = analytic_scene(dir.path(), "adaptive", 32, 20);
@@ -205,7 +271,7 @@ fn the_type_stubs_match_the_native_module_and_type_check_the_examples() {
     };
     let cache = tempfile::tempdir().unwrap();
     let cache = cache.path().to_str().unwrap();
-    run(&["-m", "mypy.stubtest", "--mypy-config-file", "/dev/null", "fbksd._native", "fbksd.client"]);
+    run(&["-m", "mypy.stubtest", "--mypy-config-file", "/dev/null", "fbksd._native", "fbksd.client", "fbksd.renderer"]);
     run(&[
         "-m",
         "mypy",

@@ -14,6 +14,8 @@
 //! beyond its callback (or beyond `send_result`) reads stale data but never
 //! crashes the interpreter.
 
+mod renderer;
+
 use fbksd_client::{BenchmarkClient as Client, ClientError, ElementIo, Mappings, SampleLayout, Spp};
 use fbksd_core::scene_info::SceneValue;
 use numpy::ndarray::{ArrayView2, ArrayView3, ArrayView4};
@@ -371,5 +373,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FbksdError", m.py().get_type::<FbksdError>())?;
     m.add("INPUT", "INPUT")?;
     m.add("OUTPUT", "OUTPUT")?;
+    renderer::register(m)?;
     Ok(())
 }

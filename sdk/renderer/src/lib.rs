@@ -48,4 +48,4 @@ pub mod sampler;
 mod server;
 
 pub use plan::plan_tiles;
-pub use server::{sample_stream, Evaluation, RendererError, RenderingServer, SampleBuffer, SamplesPipe};
+pub use server::{sample_stream, Evaluation, MappingGuard, RendererError, RenderingServer, SampleBuffer, SamplesPipe};

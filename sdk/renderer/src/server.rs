@@ -357,6 +357,18 @@ impl Evaluation {
     }
 }
 
+/// Keeps a session's shared memory mapped, for language bindings whose
+/// arrays view a pipe's samples and may be kept after it is finished.
+#[derive(Clone)]
+pub struct MappingGuard(#[allow(dead_code)] Arc<Ring>);
+
+impl Evaluation {
+    /// A guard that keeps the shared memory mapped while it lives.
+    pub fn mapping(&self) -> MappingGuard {
+        MappingGuard(self.ring.clone())
+    }
+}
+
 /// One slot of the ring, owned by the renderer while it writes a tile.
 ///
 /// Call [`SamplesPipe::finish`] when every sample is written; a pipe dropped

@@ -10,7 +10,7 @@ _LayoutElement = Union[str, Tuple[str, int], Tuple[str, Literal["INPUT", "OUTPUT
 _TileCallback = Callable[[_Array, Tuple[int, int]], object]
 _SamplesCallback = Callable[[_Array], object]
 
-__all__ = ["BenchmarkClient", "SceneInfo", "FbksdError", "INPUT", "OUTPUT"]
+__all__ = ["BenchmarkClient", "SceneInfo", "FbksdError", "INPUT", "OUTPUT", "RenderingServer"]
 
 INPUT: Literal["INPUT"]
 OUTPUT: Literal["OUTPUT"]
@@ -38,3 +38,18 @@ class BenchmarkClient:
     def evaluate_input_samples(self, spp: int, producer: _TileCallback, consumer: _TileCallback) -> None: ...
     def evaluate_input_sample_count(self, count: int, producer: _SamplesCallback, consumer: _SamplesCallback) -> None: ...
     def send_result(self) -> None: ...
+
+_Positions = npt.NDArray[np.float64]
+# (name, number, offset, "INPUT" | "OUTPUT") per layout element.
+_Element = Tuple[str, int, int, str]
+
+@final
+class RenderingServer:
+    def __new__(
+        cls,
+        scene_info: Callable[[], dict[str, Any]],
+        fill: Callable[[dict[str, int], _Positions, _Array], object],
+        set_layout: Callable[[list[_Element]], object] | None = None,
+        tile_size: int = 32,
+    ) -> RenderingServer: ...
+    def run(self) -> None: ...
