@@ -17,7 +17,9 @@ APT_PACKAGES=(build-essential pkg-config cmake libembree-dev python3-pip python3
     # fbksd-ci's base image is built from Debian packages (no registry).
     mmdebstrap
     # deploy/compose.yaml (server, PostgreSQL and runners) and its check.
-    docker-compose)
+    docker-compose
+    # Mitsuba 3's vectorised variants (fbksd-mitsuba) compile with LLVM.
+    libllvm19)
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -41,11 +43,12 @@ if ! command -v cargo >/dev/null; then
     exit 1
 fi
 # Independent implementations the metric tests compare against; mypy checks
-# the Python SDK's type stubs; and the python environment's own packages,
-# pinned as in its image (numpy, SciPy, OpenEXR, pyoidn), for the baselines'
-# tests.
-PIP_PACKAGES=(scikit-image flip-evaluator mypy -r "$(dirname "$0")/images/python/requirements.txt")
-if ! python3 -c "import numpy, scipy, OpenEXR, pyoidn, skimage, flip_evaluator, mypy" >/dev/null 2>&1; then
+# the Python SDK's type stubs; Mitsuba 3, the renderer behind
+# renderers/mitsuba/fbksd-mitsuba; and the python environment's own
+# packages, pinned as in its image (numpy, SciPy, OpenEXR, pyoidn), for the
+# baselines' tests.
+PIP_PACKAGES=(scikit-image flip-evaluator mypy mitsuba==3.9.1 -r "$(dirname "$0")/images/python/requirements.txt")
+if ! python3 -c "import numpy, scipy, OpenEXR, pyoidn, skimage, flip_evaluator, mypy, mitsuba" >/dev/null 2>&1; then
     if ! python3 -m pip --version >/dev/null 2>&1; then
         sudo_cmd=""
         [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"

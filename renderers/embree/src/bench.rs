@@ -53,7 +53,8 @@ pub fn run(scenes: &[std::path::PathBuf], spp: u64, out_dir: Option<&Path>) -> a
 
 /// Writes a scene made of diffuse triangle meshes, mesh area lights and a
 /// pinhole camera as binary PLY files plus `scene.json`, which
-/// `bench/mitsuba_bench.py` turns into the same scene for Mitsuba 3.
+/// `bench/mitsuba_bench.py` turns into the same scene for Mitsuba 3, and
+/// `scene.xml`, the same as a Mitsuba scene file (for `fbksd-mitsuba`).
 pub fn export_for_mitsuba(path: &Path, dir: &Path) -> anyhow::Result<()> {
     use crate::scene::light::Light;
     use crate::scene::material::Material;
@@ -103,7 +104,48 @@ pub fn export_for_mitsuba(path: &Path, dir: &Path) -> anyhow::Result<()> {
         "shapes": shapes,
     });
     std::fs::write(dir.join("scene.json"), serde_json::to_vec_pretty(&json)?)?;
+    std::fs::write(dir.join("scene.xml"), mitsuba_xml(&scene, &shapes))?;
     Ok(())
+}
+
+/// The same scene as a Mitsuba 3 XML file (for `fbksd-mitsuba`): the camera
+/// (pbrt's x points right on the image, Mitsuba's left, hence the mirror),
+/// a box filter, the path tracer at the same depth (Mitsuba counts the
+/// camera's first hit as a vertex) with Russian roulette where pbrt starts it.
+fn mitsuba_xml(scene: &crate::scene::Scene, shapes: &[serde_json::Value]) -> String {
+    let c = &scene.camera;
+    let r = &c.camera_to_world.rows;
+    let matrix: Vec<String> = (0..3)
+        .flat_map(|i| (0..4).map(move |j| if j == 0 { -r[i][j] } else { r[i][j] }))
+        .chain([0.0, 0.0, 0.0, 1.0])
+        .map(|v| v.to_string())
+        .collect();
+    let rgb = |v: &serde_json::Value| {
+        v.as_array().map_or(String::new(), |a| a.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", "))
+    };
+    let mut xml = format!(
+        "<scene version=\"3.0.0\">\n  <integrator type=\"path\"><integer name=\"max_depth\" value=\"{}\"/><integer name=\"rr_depth\" value=\"2\"/></integrator>\n  <sensor type=\"perspective\">\n    <float name=\"fov\" value=\"{}\"/><string name=\"fov_axis\" value=\"smaller\"/>\n    <transform name=\"to_world\"><matrix value=\"{}\"/></transform>\n    <film type=\"hdrfilm\"><integer name=\"width\" value=\"{}\"/><integer name=\"height\" value=\"{}\"/><string name=\"pixel_format\" value=\"rgb\"/><rfilter type=\"box\"/></film>\n  </sensor>\n",
+        scene.max_depth + 1,
+        2.0 * c.tan_half_fov.atan().to_degrees(),
+        matrix.join(" "),
+        c.width,
+        c.height
+    );
+    for s in shapes {
+        xml += &format!(
+            "  <shape type=\"ply\"><string name=\"filename\" value=\"{}\"/><boolean name=\"face_normals\" value=\"true\"/>\n    <bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"{}\"/></bsdf>\n",
+            s["ply"].as_str().unwrap_or_default(),
+            rgb(&s["reflectance"])
+        );
+        if !s["emitter"].is_null() {
+            xml += &format!(
+                "    <emitter type=\"area\"><rgb name=\"radiance\" value=\"{}\"/></emitter>\n",
+                rgb(&s["emitter"])
+            );
+        }
+        xml += "  </shape>\n";
+    }
+    xml + "</scene>\n"
 }
 
 /// How far two renderings of one scene agree beyond their noise: the
