@@ -205,7 +205,8 @@ fn every_error_names_the_file_line_and_problem() {
     error_at("Material \"diffuse\" \"texture reflectance\" \"nope\"\n", 1, "not defined");
     error_at("Material \"hair\"\n", 1, "unsupported material \"hair\"");
     error_at("Material \"coateddiffuse\" \"float thickness\" 0.1\n", 1, "unused parameter \"float thickness\"");
-    error_at("Material \"dielectric\" \"spectrum eta\" [300 1.5 800 1.4]\n", 1, "sampled spectra are not supported");
+    error_at("Material \"dielectric\" \"spectrum eta\" [300 1.5 800 1.4]\n", 1, "dispersion is not supported");
+    error_at("Material \"conductor\" \"spectrum eta\" [500 1.5 400 1.4]\n", 1, "pairs of increasing wavelength");
     error_at("Material \"conductor\" \"spectrum eta\" \"metal-Xx-eta\"\n", 1, "unknown named spectrum");
     error_at("Texture \"t\" \"spectrum\" \"marble\"\n", 1, "unsupported texture class \"marble\"");
     error_at("Texture \"t\" \"spectrum\" \"imagemap\" \"string filename\" \"none.png\"\n", 1, "none.png");

@@ -306,10 +306,13 @@ impl ParamSet {
             ("float", Values::Nums(v)) if v.len() == 1 && v[0] >= 0.0 => {
                 Ok(Some(SpectrumValue::Rgb(Vec3::splat(v[0] as f32))))
             }
-            ("spectrum", Values::Nums(_)) => Err(SceneError::at(
-                &p.loc,
-                format!("sampled spectra are not supported for {name:?}; give \"rgb {name}\""),
-            )),
+            ("spectrum", Values::Nums(v)) => match sampled_spectrum_rgb(v) {
+                Some(rgb) => Ok(Some(SpectrumValue::Rgb(rgb))),
+                None => Err(self.invalid(
+                    name,
+                    "must be pairs of increasing wavelength (nm) and non-negative value, or a named spectrum",
+                )),
+            },
             _ => Err(self.wrong_type(p, "rgb [r g b], a named spectrum, blackbody T, or a texture")),
         }
     }
@@ -381,6 +384,33 @@ fn named_spectrum(name: &str) -> Option<Vec3> {
     NAMED.iter().find(|n| n.0 == name).map(|n| Vec3::from_array(n.1))
 }
 
+/// The sRGB primaries' dominant wavelengths (nm): where spectra are read as RGB.
+const PRIMARIES_NM: [f64; 3] = [611.0, 549.0, 464.0];
+
+/// An inline sampled spectrum (`"spectrum eta" [λ₀ v₀ λ₁ v₁ …]`) as RGB:
+/// its values at the primaries' wavelengths, interpolated linearly (held
+/// constant past the ends), as the named spectra are approximated.
+fn sampled_spectrum_rgb(v: &[f64]) -> Option<Vec3> {
+    if v.len() < 2 || v.len() % 2 != 0 {
+        return None;
+    }
+    let pairs: Vec<(f64, f64)> = v.chunks_exact(2).map(|c| (c[0], c[1])).collect();
+    if pairs.windows(2).any(|w| w[1].0 <= w[0].0) || pairs.iter().any(|p| !(p.1 >= 0.0) || !p.0.is_finite()) {
+        return None;
+    }
+    let at = |nm: f64| {
+        let i = pairs.partition_point(|p| p.0 < nm);
+        match (pairs.get(i.wrapping_sub(1)), pairs.get(i)) {
+            (Some(a), Some(b)) => a.1 + (b.1 - a.1) * (nm - a.0) / (b.0 - a.0),
+            (Some(a), None) => a.1,
+            (None, Some(b)) => b.1,
+            (None, None) => 0.0,
+        }
+    };
+    let [r, g, b] = PRIMARIES_NM.map(|nm| at(nm) as f32);
+    Some(vec3(r, g, b))
+}
+
 /// The colour of a blackbody at `t` kelvin, normalised to a maximum of 1
 /// (pbrt's `blackbody` is normalised the same way), in linear sRGB.
 pub fn blackbody_rgb(t: f32) -> Vec3 {
@@ -390,10 +420,26 @@ pub fn blackbody_rgb(t: f32) -> Vec3 {
         let (c, h, kb) = (299_792_458.0f64, 6.626_070_15e-34f64, 1.380_649e-23f64);
         (2.0 * h * c * c) / (l.powi(5) * ((h * c / (l * kb * t as f64)).exp() - 1.0))
     };
-    let rgb = [planck(611.0), planck(549.0), planck(464.0)];
+    let rgb = PRIMARIES_NM.map(|nm| planck(nm as f32));
     let max = rgb.iter().cloned().fold(0.0, f64::max);
     if !(max > 0.0) || !max.is_finite() {
         return Vec3::ZERO;
     }
     vec3((rgb[0] / max) as f32, (rgb[1] / max) as f32, (rgb[2] / max) as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sampled_spectrum_is_read_at_the_primaries() {
+        // Linear from 400 nm (1) to 700 nm (4): 611 → 3.11, 549 → 2.49, 464 → 1.64.
+        let rgb = sampled_spectrum_rgb(&[400.0, 1.0, 700.0, 4.0]).unwrap();
+        assert!((rgb.x - 3.11).abs() < 1e-5 && (rgb.y - 2.49).abs() < 1e-5 && (rgb.z - 1.64).abs() < 1e-5, "{rgb:?}");
+        // Past the ends the end values hold.
+        assert_eq!(sampled_spectrum_rgb(&[620.0, 2.0, 630.0, 3.0]).unwrap(), vec3(2.0, 2.0, 2.0));
+        assert!(sampled_spectrum_rgb(&[500.0, 1.0, 400.0, 1.0]).is_none(), "wavelengths must increase");
+        assert!(sampled_spectrum_rgb(&[500.0, 1.0, 600.0]).is_none(), "pairs");
+    }
 }
