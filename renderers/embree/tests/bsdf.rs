@@ -6,7 +6,7 @@
 use fbksd_embree::bsdf::coated::Coated;
 use fbksd_embree::bsdf::conductor::Conductor;
 use fbksd_embree::bsdf::dielectric::Dielectric;
-use fbksd_embree::bsdf::diffuse::Diffuse;
+use fbksd_embree::bsdf::diffuse::{Diffuse, DiffuseTransmission};
 use fbksd_embree::bsdf::microfacet::Ggx;
 use fbksd_embree::bsdf::Bsdf;
 use fbksd_embree::math::{vec3, Vec3};
@@ -57,6 +57,13 @@ fn models() -> Vec<(&'static str, Bsdf)> {
         ("dielectric α=0.1", Bsdf::Dielectric(Dielectric { distribution: Ggx::new(0.1, 0.1), eta: 1.33 })),
         ("coated α=0.2", coated(Ggx::new(0.2, 0.2), vec3(0.7, 0.2, 0.1))),
         ("coated smooth", coated(Ggx::new(0.0, 0.0), vec3(0.5, 0.5, 0.5))),
+        (
+            "diffuse transmission",
+            Bsdf::DiffuseTransmission(DiffuseTransmission {
+                reflectance: vec3(0.6, 0.3, 0.1),
+                transmittance: vec3(0.2, 0.5, 0.3),
+            }),
+        ),
     ]
 }
 
@@ -68,7 +75,7 @@ fn direction(theta_deg: f32, phi_deg: f32) -> Vec3 {
 /// Outgoing directions: from above, near grazing, and from below (inside glass).
 fn outgoing(bsdf: &Bsdf) -> Vec<Vec3> {
     let mut w = vec![direction(10.0, 30.0), direction(60.0, 200.0), direction(85.0, 100.0)];
-    if matches!(bsdf, Bsdf::Dielectric(_)) {
+    if matches!(bsdf, Bsdf::Dielectric(_) | Bsdf::DiffuseTransmission(_)) {
         w.push(direction(140.0, 45.0));
     }
     w
@@ -176,6 +183,13 @@ fn no_model_reflects_or_transmits_more_than_it_receives() {
     // Perfect reflectors too: a white diffuse surface, and a conductor with reflectance 1.
     let mut all = models();
     all.push(("white diffuse", Bsdf::Diffuse(Diffuse { reflectance: Vec3::ONE })));
+    all.push((
+        "white diffuse transmission",
+        Bsdf::DiffuseTransmission(DiffuseTransmission {
+            reflectance: Vec3::splat(0.5),
+            transmittance: Vec3::splat(0.5),
+        }),
+    ));
     let k = fbksd_embree::bsdf::fresnel::k_from_reflectance(Vec3::splat(0.9999));
     all.push((
         "ideal conductor α=0.5",
@@ -184,20 +198,29 @@ fn no_model_reflects_or_transmits_more_than_it_receives() {
     for (name, bsdf) in all {
         for wo in outgoing(&bsdf) {
             let n = 100_000;
-            let (mut sum, mut sum2) = (0f64, 0f64);
+            // Per channel: a model may sample by one channel and weight the others.
+            let (mut sum, mut sum2) = ([0f64; 3], [0f64; 3]);
             for _ in 0..n {
                 // Flux, not radiance: refraction's 1/η² is undone by η².
                 let w = match bsdf.sample(wo, rng.next(), [rng.next(), rng.next()]) {
-                    Some(s) => (s.f * (s.wi.z.abs() / s.pdf * s.eta * s.eta)).max_component() as f64,
-                    None => 0.0,
+                    Some(s) => (s.f * (s.wi.z.abs() / s.pdf * s.eta * s.eta)).to_array(),
+                    None => [0.0; 3],
                 };
-                assert!(w.is_finite() && w >= 0.0, "{name}: weight {w}");
-                sum += w;
-                sum2 += w * w;
+                for c in 0..3 {
+                    let w = w[c] as f64;
+                    assert!(w.is_finite() && w >= 0.0, "{name}: weight {w}");
+                    sum[c] += w;
+                    sum2[c] += w * w;
+                }
             }
-            let mean = sum / n as f64;
-            let sigma = ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt();
-            assert!(mean <= 1.0 + 1e-3 + 4.0 * sigma, "{name}, wo = {wo:?}: albedo {mean:.4} ± {sigma:.4}");
+            for c in 0..3 {
+                let mean = sum[c] / n as f64;
+                let sigma = ((sum2[c] / n as f64 - mean * mean).max(0.0) / n as f64).sqrt();
+                assert!(
+                    mean <= 1.0 + 1e-3 + 4.0 * sigma,
+                    "{name}, wo = {wo:?}, channel {c}: albedo {mean:.4} ± {sigma:.4}"
+                );
+            }
         }
     }
 }

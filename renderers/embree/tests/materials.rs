@@ -52,3 +52,22 @@ fn a_shape_with_an_interface_material_is_left_out_with_a_warning() {
     let (data, _) = samples(&scene, &layout(&["WORLD_Z"]), 4, 0);
     assert!(data.iter().all(|z| (z - 5.0).abs() < 1e-3), "every ray reaches the plane");
 }
+
+#[test]
+fn diffuse_transmission_lets_light_through_from_behind() {
+    // A sheet lit from behind by a distant light (L = 2, straight on): its
+    // visible side shows the transmitted T/π·E, nothing reflected.
+    let text = header(8, 8, 60.0, 1)
+        + "LightSource \"distant\" \"point3 from\" [0 0 10] \"point3 to\" [0 0 0] \"rgb L\" [2 2 2]\n\
+           Material \"diffusetransmission\" \"rgb reflectance\" [0 0 0] \"rgb transmittance\" [0.5 0.3 0.1]\n"
+        + PLANE;
+    let scene = scene(&text, &[]).unwrap();
+    let (data, _) = samples(&scene, &layout(&["COLOR_R", "COLOR_G", "COLOR_B", "TEXTURE_COLOR_R"]), 4, 0);
+    for s in data.chunks_exact(4) {
+        for (c, t) in [0.5f32, 0.3, 0.1].iter().enumerate() {
+            let want = t / std::f32::consts::PI * 2.0;
+            assert!((s[c] - want).abs() < 1e-4, "channel {c}: {} vs {want}", s[c]);
+        }
+        assert_eq!(s[3], 0.0, "the albedo feature is the reflectance");
+    }
+}

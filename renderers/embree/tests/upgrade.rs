@@ -122,8 +122,17 @@ fn a_pbrt_v3_scene_renders_as_its_pbrt_v4_upgrade() {
 
 #[test]
 fn a_v3_material_without_a_v4_counterpart_is_an_error_naming_it() {
-    let text = V4.replace("Material \"conductor\" \"float roughness\" 0.05", "Material \"translucent\"");
+    let text = V4.replace("Material \"conductor\" \"float roughness\" 0.05", "Material \"kdsubsurface\"");
     let err = scene_with_warnings(&text).err().unwrap();
-    assert!(err.contains("scene.pbrt:22:") && err.contains("unsupported material \"diffusetransmission\""), "{err}");
-    assert!(err.contains("read from pbrt-v3's \"translucent\""), "{err}");
+    assert!(err.contains("scene.pbrt:22:") && err.contains("unsupported material \"subsurface\""), "{err}");
+    assert!(err.contains("read from pbrt-v3's \"kdsubsurface\""), "{err}");
+    // translucent has one: diffuse transmission.
+    let text = V4.replace(
+        "Material \"conductor\" \"float roughness\" 0.05",
+        "Material \"translucent\" \"rgb Kd\" [0.4 0.4 0.4] \"rgb reflect\" [0 0 0] \"rgb transmit\" [1 1 1]",
+    );
+    let (_, warnings) = scene_with_warnings(&text).unwrap();
+    assert!(warnings
+        .iter()
+        .any(|w| w.contains("scene.pbrt:22:") && w.contains("\"translucent\" read as \"diffusetransmission\"")));
 }

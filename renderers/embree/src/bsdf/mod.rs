@@ -6,6 +6,7 @@
 //! - [`conductor`]: smooth or GGX-rough metal with complex Fresnel.
 //! - [`dielectric`]: smooth or GGX-rough glass (reflection and transmission).
 //! - [`coated`]: a dielectric GGX coating over a diffuse base (plastic).
+//! - [`diffuse::DiffuseTransmission`]: Lambertian reflection and transmission.
 //!
 //! Reflection-only models are two-sided: seen from below, they act as if
 //! mirrored. Values are radiance-transport values (transmission divided by
@@ -49,6 +50,8 @@ pub enum Bsdf {
     Dielectric(dielectric::Dielectric),
     /// Plastic: coating over a diffuse base.
     Coated(coated::Coated),
+    /// Lambertian reflection and transmission.
+    DiffuseTransmission(diffuse::DiffuseTransmission),
 }
 
 /// Flips `w` to the upper hemisphere when `flip` (two-sided reflection).
@@ -64,7 +67,7 @@ fn upper(w: Vec3, flip: bool) -> Vec3 {
 impl Bsdf {
     /// Whether the model only reflects (and so is two-sided).
     fn reflective(&self) -> bool {
-        !matches!(self, Bsdf::Dielectric(_))
+        !matches!(self, Bsdf::Dielectric(_) | Bsdf::DiffuseTransmission(_))
     }
 
     /// Whether every lobe is a delta: no light sampling, and the surface
@@ -74,7 +77,7 @@ impl Bsdf {
             Bsdf::Diffuse(_) => false,
             Bsdf::Conductor(c) => c.distribution.effectively_smooth(),
             Bsdf::Dielectric(d) => d.is_delta(),
-            Bsdf::Coated(_) => false,
+            Bsdf::Coated(_) | Bsdf::DiffuseTransmission(_) => false,
         }
     }
 
@@ -87,6 +90,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.eval(wo, wi),
             Bsdf::Dielectric(b) => b.eval(wo, wi),
             Bsdf::Coated(b) => b.eval(wo, wi).0,
+            Bsdf::DiffuseTransmission(b) => b.eval(wo, wi),
         }
     }
 
@@ -97,6 +101,7 @@ impl Bsdf {
         let whole = |roughness: f32, f: Vec3| if roughness >= threshold { f } else { Vec3::ZERO };
         match self {
             Bsdf::Diffuse(b) => b.eval(wo, wi),
+            Bsdf::DiffuseTransmission(b) => b.eval(wo, wi),
             Bsdf::Conductor(b) => whole(b.distribution.alpha(), b.eval(wo, wi)),
             Bsdf::Dielectric(b) => whole(b.distribution.alpha(), b.eval(wo, wi)),
             Bsdf::Coated(b) => {
@@ -115,6 +120,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.pdf(wo, wi),
             Bsdf::Dielectric(b) => b.pdf(wo, wi),
             Bsdf::Coated(b) => b.pdf(wo, wi),
+            Bsdf::DiffuseTransmission(b) => b.pdf(wo, wi),
         };
         if p.is_finite() {
             p
@@ -132,6 +138,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.sample(wo, u),
             Bsdf::Dielectric(b) => b.sample(wo, uc, u),
             Bsdf::Coated(b) => b.sample(wo, uc, u),
+            Bsdf::DiffuseTransmission(b) => b.sample(wo, uc, u),
         }?;
         s.wi = upper(s.wi, flip);
         (s.pdf > 0.0 && s.pdf.is_finite() && s.f.is_finite() && s.wi.z != 0.0).then_some(s)

@@ -310,6 +310,14 @@ impl Parser {
                     internal_reflectance: crate::bsdf::coated::Coated::internal_reflectance(eta),
                 }
             }
+            "diffusetransmission" => {
+                let scale = params.float("scale", 1.0)?;
+                let scaled = |name: &str| -> Result<Arc<Texture>, SceneError> {
+                    let t = self.spectrum_texture(params, name, Vec3::splat(0.25))?;
+                    Ok(if scale == 1.0 { t } else { Arc::new(Texture::Scale(t, Arc::new(Texture::Constant(Vec3::splat(scale))))) })
+                };
+                Material::DiffuseTransmission { reflectance: scaled("reflectance")?, transmittance: scaled("transmittance")? }
+            }
             "" | "none" | "interface" => Material::Interface,
             "mix" => {
                 let names = match params.get("materials").map(|p| &p.values) {
@@ -329,7 +337,7 @@ impl Parser {
                 return Err(SceneError::at(
                     loc,
                     format!(
-                        "unsupported material {other:?} (supported: diffuse, conductor, dielectric, coateddiffuse, mix, interface)"
+                        "unsupported material {other:?} (supported: diffuse, conductor, dielectric, coateddiffuse, diffusetransmission, mix, interface)"
                     ),
                 ))
             }

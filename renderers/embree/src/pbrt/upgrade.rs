@@ -115,6 +115,10 @@ pub(super) fn material(ty: &str, params: &mut ParamSet) -> Result<Upgraded, Scen
         "translucent" => {
             up.retype("material", "diffusetransmission");
             up.rename(params, "Kd", "transmittance");
+            up.drop(params, "reflect", Some(0.0));
+            up.drop(params, "transmit", Some(1.0));
+            up.drop(params, "Ks", Some(0.0));
+            up.drop(params, "roughness", None);
         }
         "kdsubsurface" => {
             up.retype("material", "subsurface");

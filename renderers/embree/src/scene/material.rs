@@ -79,6 +79,13 @@ pub enum Material {
         /// The probability of the second.
         amount: Arc<Texture>,
     },
+    /// pbrt `diffusetransmission`.
+    DiffuseTransmission {
+        /// Albedo of the reflection.
+        reflectance: Arc<Texture>,
+        /// Albedo of the transmission.
+        transmittance: Arc<Texture>,
+    },
     /// pbrt `interface`: the boundary of a participating medium, itself
     /// invisible. Media are not rendered, so its shapes are left out.
     Interface,
@@ -100,6 +107,12 @@ impl Material {
             Material::Dielectric { eta, roughness } => {
                 Bsdf::Dielectric(Dielectric { distribution: roughness.distribution(uv), eta: *eta })
             }
+            Material::DiffuseTransmission { reflectance, transmittance } => {
+                Bsdf::DiffuseTransmission(crate::bsdf::diffuse::DiffuseTransmission {
+                    reflectance: clamp01(reflectance.eval(uv)),
+                    transmittance: clamp01(transmittance.eval(uv)),
+                })
+            }
             // Resolved before shading (a mix), or never hit (an interface): black if it were.
             Material::Mix { .. } | Material::Interface => Bsdf::Diffuse(Diffuse { reflectance: Vec3::ZERO }),
             Material::CoatedDiffuse { reflectance, roughness, eta, internal_reflectance } => Bsdf::Coated(Coated {
@@ -117,9 +130,9 @@ impl Material {
     /// for dielectrics.
     pub fn albedo(&self, uv: [f32; 2]) -> Vec3 {
         match self {
-            Material::Diffuse { reflectance } | Material::CoatedDiffuse { reflectance, .. } => {
-                reflectance.eval(uv).map(|c| c.clamp(0.0, 1.0))
-            }
+            Material::Diffuse { reflectance }
+            | Material::CoatedDiffuse { reflectance, .. }
+            | Material::DiffuseTransmission { reflectance, .. } => reflectance.eval(uv).map(|c| c.clamp(0.0, 1.0)),
             Material::Conductor { .. } => match self.bsdf(uv) {
                 Bsdf::Conductor(c) => crate::bsdf::fresnel::conductor(1.0, c.eta, c.k),
                 _ => unreachable!("a conductor's BSDF is a conductor"),
