@@ -187,7 +187,6 @@ fn every_error_names_the_file_line_and_problem() {
         "unused parameter \"float zmax\" for Shape \"sphere\"",
     );
     error_at("Shape \"sphere\" \"integer radius\" 1\n", 1, "should be float");
-    error_at("Shape \"sphere\" \"float radius\" 1 \"float radius\" 2\n", 1, "given twice");
     error_at("Shape \"sphere\" \"float radius\" -1\n", 1, "must be positive");
     error_at("Shape \"sphere\" \"float radius\" [1 2]\n", 1, "takes one value");
     error_at("Shape \"sphere\" \"flaot radius\" 1\n", 1, "unknown parameter type \"flaot\"");
@@ -249,6 +248,19 @@ fn every_error_names_the_file_line_and_problem() {
     error_at("LightSource \"infinite\" \"string filename\" \"sky.exr\"\n", 1, "sky.exr");
     error_at("ActiveTransform Sometimes\n", 1, "StartTime, EndTime or All");
     error_at("\"float x\" 1\n", 1, "expected a directive");
+}
+
+#[test]
+fn a_parameter_given_twice_is_read_once_with_a_warning() {
+    // As pbrt: the first value counts (real scene files repeat parameters).
+    let (s, w) =
+        scene_with_warnings(&format!("{CAMERA}WorldBegin\nShape \"sphere\" \"float radius\" 1 \"float radius\" 2\n"))
+            .unwrap();
+    match &s.shapes[0].geometry {
+        Geometry::Sphere { steps, .. } => assert_eq!(steps[0][3], 1.0),
+        other => panic!("{other:?}"),
+    }
+    assert!(w.iter().any(|w| w.contains("scene.pbrt:5:") && w.contains("\"radius\" given twice")), "{w:?}");
 }
 
 #[test]

@@ -38,7 +38,8 @@ const V3_TYPES: &[(&str, &str)] =
 #[derive(Debug, Clone)]
 pub struct ParamSet {
     params: Vec<Param>,
-    /// pbrt-v3 constructs read the pbrt-v4 way, for warnings.
+    /// Constructs read with a conversion (pbrt-v3 forms, repeated
+    /// parameters), for warnings.
     pub upgrades: Vec<(Loc, String)>,
     /// E.g. `Shape "sphere"`.
     pub owner: String,
@@ -92,7 +93,9 @@ impl ParamSet {
             None => return Err(SceneError::at(&loc, format!("unknown parameter type {ty:?} in {decl:?}"))),
         };
         if self.params.iter().any(|p| p.name == name) {
-            return Err(SceneError::at(&loc, format!("parameter {name:?} given twice for {}", self.owner)));
+            // pbrt reads the first and lets the rest be (real scene files repeat parameters).
+            self.upgrades.push((loc, format!("parameter {name:?} given twice for {}: the first is used", self.owner)));
+            return Ok(());
         }
         let ok = match (&values, ty) {
             (Values::Strs(_), "string" | "texture" | "spectrum" | "bool") => true,
