@@ -71,3 +71,26 @@ fn diffuse_transmission_lets_light_through_from_behind() {
         assert_eq!(s[3], 0.0, "the albedo feature is the reflectance");
     }
 }
+
+#[test]
+fn a_thin_glass_pane_loses_no_light_and_bends_none() {
+    // Under a uniform sky the pane's reflection and transmission add up to the sky.
+    let pane = "Material \"thindielectric\" \"float eta\" 1.5\n\
+                Shape \"trianglemesh\" \"point3 P\" [-50 -50 3  50 -50 3  50 50 3  -50 50 3] \"integer indices\" [0 1 2 0 2 3]\n";
+    let sky = header(8, 8, 60.0, 20) + "LightSource \"infinite\" \"rgb L\" [0.5 0.5 0.5]\n" + pane;
+    let (data, _) = samples(&scene(&sky, &[]).unwrap(), &layout(&["COLOR_R"]), 256, 0);
+    let mean = data.iter().map(|v| *v as f64).sum::<f64>() / data.len() as f64;
+    assert!((mean - 0.5).abs() < 0.01, "{mean}");
+    // Seen through the pane, the wall behind is where the camera ray meets it: no refraction.
+    let wall = header(8, 8, 60.0, 20) + pane + "Material \"diffuse\"\n" + PLANE;
+    let l = layout(&["IMAGE_X", "IMAGE_Y", "WORLD_X_NS", "WORLD_Y_NS", "WORLD_Z_NS"]);
+    let (data, _) = samples(&scene(&wall, &[]).unwrap(), &l, 16, 0);
+    let tan = 30f32.to_radians().tan();
+    let mut through = 0;
+    for s in data.chunks_exact(5).filter(|s| (s[4] - 5.0).abs() < 1e-3) {
+        through += 1;
+        let (sx, sy) = ((s[0] / 8.0) * 2.0 - 1.0, 1.0 - (s[1] / 8.0) * 2.0);
+        assert!((s[2] - 5.0 * sx * tan).abs() < 1e-3 && (s[3] - 5.0 * sy * tan).abs() < 1e-3, "{s:?}");
+    }
+    assert!(through > 500, "{through} samples see the wall through the pane");
+}

@@ -134,3 +134,34 @@ impl Dielectric {
         }
     }
 }
+
+/// A thin sheet of glass (pbrt's `thindielectric`: window panes): light is
+/// reflected or passes straight through, after any number of reflections
+/// inside the sheet, and never bends.
+#[derive(Debug, Clone, Copy)]
+pub struct ThinDielectric {
+    /// Index inside / index outside.
+    pub eta: f32,
+}
+
+impl ThinDielectric {
+    pub(super) fn sample(&self, wo: Vec3, uc: f32) -> Option<BsdfSample> {
+        let cos = wo.z.abs();
+        let mut r = super::fresnel::dielectric(cos, self.eta);
+        let mut t = 1.0 - r;
+        // The light bouncing between the two faces: a geometric series.
+        if r < 1.0 {
+            r += t * t * r / (1.0 - r * r);
+            t = 1.0 - r;
+        }
+        let (wi, share) = if uc < r { (vec3(-wo.x, -wo.y, wo.z), r) } else { (-wo, t) };
+        (cos > 0.0 && share > 0.0).then(|| BsdfSample {
+            f: Vec3::splat(share / cos),
+            wi,
+            pdf: share,
+            delta: true,
+            eta: 1.0,
+            roughness: 0.0,
+        })
+    }
+}

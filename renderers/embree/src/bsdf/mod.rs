@@ -4,7 +4,8 @@
 //!
 //! - [`diffuse`]: Lambertian reflection.
 //! - [`conductor`]: smooth or GGX-rough metal with complex Fresnel.
-//! - [`dielectric`]: smooth or GGX-rough glass (reflection and transmission).
+//! - [`dielectric`]: smooth or GGX-rough glass (reflection and transmission),
+//!   and thin glass sheets.
 //! - [`coated`]: a dielectric GGX coating over a diffuse base (plastic).
 //! - [`diffuse::DiffuseTransmission`]: Lambertian reflection and transmission.
 //!
@@ -52,6 +53,8 @@ pub enum Bsdf {
     Coated(coated::Coated),
     /// Lambertian reflection and transmission.
     DiffuseTransmission(diffuse::DiffuseTransmission),
+    /// A thin glass sheet: specular reflection and straight transmission.
+    ThinDielectric(dielectric::ThinDielectric),
 }
 
 /// Flips `w` to the upper hemisphere when `flip` (two-sided reflection).
@@ -67,7 +70,7 @@ fn upper(w: Vec3, flip: bool) -> Vec3 {
 impl Bsdf {
     /// Whether the model only reflects (and so is two-sided).
     fn reflective(&self) -> bool {
-        !matches!(self, Bsdf::Dielectric(_) | Bsdf::DiffuseTransmission(_))
+        !matches!(self, Bsdf::Dielectric(_) | Bsdf::DiffuseTransmission(_) | Bsdf::ThinDielectric(_))
     }
 
     /// Whether every lobe is a delta: no light sampling, and the surface
@@ -78,6 +81,7 @@ impl Bsdf {
             Bsdf::Conductor(c) => c.distribution.effectively_smooth(),
             Bsdf::Dielectric(d) => d.is_delta(),
             Bsdf::Coated(_) | Bsdf::DiffuseTransmission(_) => false,
+            Bsdf::ThinDielectric(_) => true,
         }
     }
 
@@ -91,6 +95,7 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.eval(wo, wi),
             Bsdf::Coated(b) => b.eval(wo, wi).0,
             Bsdf::DiffuseTransmission(b) => b.eval(wo, wi),
+            Bsdf::ThinDielectric(_) => Vec3::ZERO,
         }
     }
 
@@ -102,6 +107,7 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.eval(wo, wi),
             Bsdf::DiffuseTransmission(b) => b.eval(wo, wi),
+            Bsdf::ThinDielectric(_) => Vec3::ZERO,
             Bsdf::Conductor(b) => whole(b.distribution.alpha(), b.eval(wo, wi)),
             Bsdf::Dielectric(b) => whole(b.distribution.alpha(), b.eval(wo, wi)),
             Bsdf::Coated(b) => {
@@ -121,6 +127,7 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.pdf(wo, wi),
             Bsdf::Coated(b) => b.pdf(wo, wi),
             Bsdf::DiffuseTransmission(b) => b.pdf(wo, wi),
+            Bsdf::ThinDielectric(_) => 0.0,
         };
         if p.is_finite() {
             p
@@ -139,6 +146,7 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.sample(wo, uc, u),
             Bsdf::Coated(b) => b.sample(wo, uc, u),
             Bsdf::DiffuseTransmission(b) => b.sample(wo, uc, u),
+            Bsdf::ThinDielectric(b) => b.sample(wo, uc),
         }?;
         s.wi = upper(s.wi, flip);
         (s.pdf > 0.0 && s.pdf.is_finite() && s.f.is_finite() && s.wi.z != 0.0).then_some(s)

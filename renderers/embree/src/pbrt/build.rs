@@ -310,6 +310,7 @@ impl Parser {
                     internal_reflectance: crate::bsdf::coated::Coated::internal_reflectance(eta),
                 }
             }
+            "thindielectric" => Material::ThinDielectric { eta: eta(1.5)? },
             "diffusetransmission" => {
                 let scale = params.float("scale", 1.0)?;
                 let scaled = |name: &str| -> Result<Arc<Texture>, SceneError> {
@@ -337,7 +338,7 @@ impl Parser {
                 return Err(SceneError::at(
                     loc,
                     format!(
-                        "unsupported material {other:?} (supported: diffuse, conductor, dielectric, coateddiffuse, diffusetransmission, mix, interface)"
+                        "unsupported material {other:?} (supported: diffuse, conductor, dielectric, thindielectric, coateddiffuse, diffusetransmission, mix, interface)"
                     ),
                 ))
             }

@@ -18,7 +18,7 @@
 //! `TransformBegin`/`End`; `ObjectBegin`/`End`, `ObjectInstance` (Embree
 //! instances); `Texture` (`imagemap`, `checkerboard`,
 //! `constant`, `scale`); `Material`, `MakeNamedMaterial`, `NamedMaterial`
-//! (`diffuse`, `conductor`, `dielectric`, `coateddiffuse`,
+//! (`diffuse`, `conductor`, `dielectric`, `thindielectric`, `coateddiffuse`,
 //! `diffusetransmission`, `mix`, and
 //! `interface`, whose shapes are left out as media are not rendered; each with a bump
 //! map `"texture displacement"` or a `"string normalmap"`); `Shape`

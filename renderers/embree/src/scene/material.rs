@@ -79,6 +79,11 @@ pub enum Material {
         /// The probability of the second.
         amount: Arc<Texture>,
     },
+    /// pbrt `thindielectric`.
+    ThinDielectric {
+        /// Index of refraction.
+        eta: f32,
+    },
     /// pbrt `diffusetransmission`.
     DiffuseTransmission {
         /// Albedo of the reflection.
@@ -106,6 +111,9 @@ impl Material {
             }
             Material::Dielectric { eta, roughness } => {
                 Bsdf::Dielectric(Dielectric { distribution: roughness.distribution(uv), eta: *eta })
+            }
+            Material::ThinDielectric { eta } => {
+                Bsdf::ThinDielectric(crate::bsdf::dielectric::ThinDielectric { eta: *eta })
             }
             Material::DiffuseTransmission { reflectance, transmittance } => {
                 Bsdf::DiffuseTransmission(crate::bsdf::diffuse::DiffuseTransmission {
@@ -137,7 +145,7 @@ impl Material {
                 Bsdf::Conductor(c) => crate::bsdf::fresnel::conductor(1.0, c.eta, c.k),
                 _ => unreachable!("a conductor's BSDF is a conductor"),
             },
-            Material::Dielectric { .. } => Vec3::ONE,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ONE,
             Material::Mix { .. } | Material::Interface => Vec3::ZERO,
         }
     }
