@@ -649,15 +649,10 @@ impl Parser {
                 film.string("filename")?;
                 // The sensor's response and the output encoding are pbrt's own
                 // film; references are linear radiance.
-                let ignored: Vec<String> =
-                    ["sensor", "iso", "whitebalance", "maxcomponentvalue", "diagonal", "savefp16", "writefp16"]
-                        .iter()
-                        .filter(|name| film.ignore(name))
-                        .map(|name| format!("{name:?}"))
-                        .collect();
-                if !ignored.is_empty() {
-                    self.warn(&film.loc, format!("{} ignored for {}", ignored.join(", "), film.owner));
-                }
+                self.ignore_hints(
+                    film,
+                    &["sensor", "iso", "whitebalance", "maxcomponentvalue", "diagonal", "savefp16", "writefp16"],
+                );
                 film.check_unused()?;
                 if !(1..=65536).contains(&w) || !(1..=65536).contains(&h) {
                     return Err(film.invalid("xresolution", "and yresolution must be between 1 and 65536"));
@@ -667,25 +662,17 @@ impl Parser {
             None => (1280, 720),
         };
         let max_depth = match &self.options.integrator {
-            Some(p) => {
+            Some((ty, p)) => {
                 let d = p.int("maxdepth", 5)?;
                 if p.bool("regularize", false)? {
                     return Err(p.invalid("regularize", "is not supported"));
                 }
                 // Settings of pbrt's own path tracers (light sampler, roulette) are hints;
                 // another integrator's settings are all hints.
-                let path = p.owner.ends_with("\"path\"") || p.owner.ends_with("\"volpath\"");
-                let ignored: Vec<String> = if path {
-                    ["lightsampler", "lightsamplestrategy", "rrthreshold", "pixelbounds"]
-                        .iter()
-                        .filter(|name| p.ignore(name))
-                        .map(|name| format!("{name:?}"))
-                        .collect()
+                if ty == "path" || ty == "volpath" {
+                    self.ignore_hints(p, &["lightsampler", "lightsamplestrategy", "rrthreshold", "pixelbounds"]);
                 } else {
-                    p.ignore_all()
-                };
-                if !ignored.is_empty() {
-                    self.warn(&p.loc, format!("{} ignored for {}", ignored.join(", "), p.owner));
+                    self.warn_ignored(p, p.ignore_all());
                 }
                 p.check_unused()?;
                 if !(0..=10_000).contains(&d) {

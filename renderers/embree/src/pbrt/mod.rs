@@ -95,6 +95,18 @@ pub fn load_with_warnings(path: &Path) -> Result<(crate::scene::Scene, Vec<Scene
 
 pub use parser::{survey, Survey};
 
+/// A scene, mesh or other input file's bytes; pbrt reads gzipped ones
+/// (`.pbrt.gz`, `.ply.gz`) too, so those are decompressed.
+fn read_file(path: &Path) -> std::io::Result<Vec<u8>> {
+    let data = std::fs::read(path)?;
+    if path.extension().is_none_or(|e| e != "gz") {
+        return Ok(data);
+    }
+    let mut plain = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(data.as_slice()), &mut plain)?;
+    Ok(plain)
+}
+
 /// One line per kind of warning: the first place, and how many more.
 pub fn summarize(warnings: &[SceneError]) -> Vec<String> {
     let mut kinds: Vec<(&str, &SceneError, usize)> = Vec::new();

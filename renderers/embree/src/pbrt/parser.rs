@@ -44,7 +44,8 @@ pub(super) struct GraphicsState {
 pub(super) struct Options {
     pub(super) camera: Option<(ParamSet, Transform)>,
     pub(super) film: Option<ParamSet>,
-    pub(super) integrator: Option<ParamSet>,
+    /// The integrator's type and parameters.
+    pub(super) integrator: Option<(String, ParamSet)>,
 }
 
 pub(super) struct Parser {
@@ -172,17 +173,6 @@ impl Cursor {
             set.push(&decl, values, loc)?;
         }
         Ok(set)
-    }
-}
-
-/// A scene file's text; `.gz` files (pbrt reads them too) are decompressed.
-fn read_text(path: &Path) -> std::io::Result<String> {
-    if path.extension().is_some_and(|e| e == "gz") {
-        let mut text = String::new();
-        std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(std::fs::File::open(path)?), &mut text)?;
-        Ok(text)
-    } else {
-        std::fs::read_to_string(path)
     }
 }
 
@@ -325,6 +315,21 @@ impl Parser {
         self.warnings.borrow_mut().push(SceneError::at(loc, message));
     }
 
+    /// Marks the hints among `params` (settings of pbrt's own renderer that
+    /// this one has no use for) as read, with one warning naming those given.
+    pub(super) fn ignore_hints(&self, params: &ParamSet, hints: &[&str]) {
+        let given: Vec<String> =
+            hints.iter().filter(|name| params.ignore(name)).map(|name| format!("{name:?}")).collect();
+        self.warn_ignored(params, given);
+    }
+
+    /// One warning naming the ignored parameters of a directive, if any.
+    pub(super) fn warn_ignored(&self, params: &ParamSet, ignored: Vec<String>) {
+        if !ignored.is_empty() {
+            self.warn(&params.loc, format!("{} ignored for {}", ignored.join(", "), params.owner));
+        }
+    }
+
     /// A directive's parameter list; warns of the pbrt-v3 parameter types it was read with.
     fn params(&self, c: &mut Cursor, owner: String, at: &Loc) -> Result<ParamSet, SceneError> {
         let mut params = c.params(owner, at)?;
@@ -352,13 +357,14 @@ impl Parser {
     }
 
     fn file(&mut self, path: &Path, from: Option<&Loc>) -> Result<(), SceneError> {
-        let src = read_text(path).map_err(|e| {
-            let message = format!("cannot read {}: {e}", path.display());
-            match from {
-                Some(loc) => SceneError::at(loc, message),
-                None => SceneError { loc: None, message },
-            }
-        })?;
+        let src =
+            super::read_file(path).and_then(|b| String::from_utf8(b).map_err(std::io::Error::other)).map_err(|e| {
+                let message = format!("cannot read {}: {e}", path.display());
+                match from {
+                    Some(loc) => SceneError::at(loc, message),
+                    None => SceneError { loc: None, message },
+                }
+            })?;
         let tokens = tokenize(&src, path)?;
         let end = Loc { file: Arc::from(path), line: src.lines().count() as u32 };
         let mut cursor = Cursor { tokens, pos: 0, end };
@@ -520,7 +526,7 @@ impl Parser {
                 if ty != "path" && ty != "volpath" {
                     self.warn(loc, format!("integrator {ty:?} is a hint: scenes are rendered by the path tracer"));
                 }
-                self.options.integrator = Some(params);
+                self.options.integrator = Some((ty, params));
             }
             "PixelFilter" => {
                 self.need_world(loc, name, false)?;

@@ -117,14 +117,7 @@ impl Body<'_> {
 
 /// Reads a PLY file.
 pub fn read(path: &Path) -> Result<PlyMesh, String> {
-    let mut data = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    // pbrt reads gzipped PLY files (`.ply.gz`) too.
-    if path.extension().is_some_and(|e| e == "gz") {
-        let mut plain = Vec::new();
-        std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(data.as_slice()), &mut plain)
-            .map_err(|e| format!("{}: not a gzip file ({e})", path.display()))?;
-        data = plain;
-    }
+    let data = super::read_file(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     parse(&data).map_err(|e| format!("{}: {e}", path.display()))
 }
 
