@@ -2,17 +2,10 @@
 # Speed of the Embree path tracer beside Mitsuba 3 (llvm_ad_rgb) in one run:
 # the Cornell box at 512×512, 64 spp, same maximum path depth, one thread and
 # all cores; then the hair scene; then how far the two Cornell images agree.
-# Installs Mitsuba (PyPI) and LLVM 19 (Debian) when missing.
+# Mitsuba (PyPI) and LLVM 19 (Debian) come with deploy/setup.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/setup.sh
-if ! dpkg-query -W -f='${Status}' libllvm19 2>/dev/null | grep -q "install ok installed"; then
-    sudo_cmd=""
-    [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
-    DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq libllvm19
-fi
-python3 -c "import mitsuba" 2>/dev/null || python3 -m pip install --quiet mitsuba \
-    || python3 -m pip install --quiet --break-system-packages mitsuba
 cargo build --release --locked -p fbksd-embree -p fbksd
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT

@@ -129,11 +129,16 @@ impl EnvironmentMap {
 
     /// Density in solid angle of [`EnvironmentMap::sample`] choosing `dir`.
     pub fn pdf(&self, dir: Vec3) -> f32 {
+        self.density(self.pixels[self.pixel_of(self.uv_of(dir))])
+    }
+
+    /// The density in solid angle of sampling a pixel of radiance `radiance`.
+    fn density(&self, radiance: Vec3) -> f32 {
         if !(self.mean_weight > 0.0) {
             return 1.0 / (4.0 * PI);
         }
         // Density over the square, then over the sphere: the mapping's Jacobian is 4π everywhere.
-        weight(self.pixels[self.pixel_of(self.uv_of(dir))]) / self.mean_weight / (4.0 * PI)
+        weight(radiance) / self.mean_weight / (4.0 * PI)
     }
 
     /// A direction towards the environment, in proportion to its radiance:
@@ -144,8 +149,7 @@ impl EnvironmentMap {
         let uv = [(column as f32 + s) / self.size as f32, (row as f32 + v) / self.size as f32];
         let dir = self.to_world.vector(square_to_sphere(uv)).normalize();
         let radiance = self.pixels[row * self.size + column];
-        let pdf =
-            if self.mean_weight > 0.0 { weight(radiance) / self.mean_weight / (4.0 * PI) } else { 1.0 / (4.0 * PI) };
+        let pdf = self.density(radiance);
         (pdf > 0.0 && dir.is_finite()).then_some((dir, radiance, pdf))
     }
 }
