@@ -143,6 +143,12 @@ pub fn build_with_cmake(source: &Path, dir: &Path) -> PathBuf {
     build
 }
 
+/// Writes an executable script (a technique, a renderer, a wrapper) at `path`.
+pub fn write_script(path: &Path, text: &str) {
+    std::fs::write(path, text).unwrap();
+    std::fs::set_permissions(path, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+}
+
 /// Runs a command; panics with its output unless it succeeds.
 pub fn run(cmd: &mut Command) -> std::process::Output {
     let out = cmd.output().unwrap_or_else(|e| panic!("{cmd:?}: {e}"));

@@ -4,7 +4,7 @@
 //! through; features it cannot compute are refused with a message; and
 //! Mitsuba agrees with our Embree path tracer on the Cornell box.
 
-use fbksd_tests::{bin, python_path, run, sdk};
+use fbksd_tests::{bin, python_path, run, sdk, write_script};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -59,7 +59,7 @@ fn features_and_input_positions_come_through_and_unknown_features_are_refused() 
     // same first hit: the middle sphere, rough gold, whose albedo Mitsuba
     // reports; the normal faces the viewer.
     let technique = dir.path().join("probe.py");
-    std::fs::write(
+    write_script(
         &technique,
         r#"#!/usr/bin/env python3
 import numpy as np
@@ -85,19 +85,15 @@ assert np.ptp(s[:, 7]) > 0, "colour differs from sample to sample: each path its
 c.send_result()
 print("probe: all checks passed")
 "#,
-    )
-    .unwrap();
-    std::fs::set_permissions(&technique, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    );
     let out = run(&mut fbksd_run(&format!("probe={}", technique.display()), &scene, 1, &dir.path().join("r1")));
     assert!(String::from_utf8_lossy(&out.stdout).contains(" ok "), "{}", String::from_utf8_lossy(&out.stdout));
     // DIRECT_LIGHT has no Mitsuba counterpart: the run fails with the renderer's reason.
     let refused = dir.path().join("refused.py");
-    std::fs::write(
+    write_script(
         &refused,
         "#!/usr/bin/env python3\nimport fbksd.client as fc\nc = fc.BenchmarkClient()\nc.set_sample_layout(['COLOR_R', 'DIRECT_LIGHT_R'])\nc.evaluate_samples(1, lambda t, o: None)\nc.send_result()\n",
-    )
-    .unwrap();
-    std::fs::set_permissions(&refused, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    );
     let out = fbksd_run(&format!("refused={}", refused.display()), &scene, 1, &dir.path().join("r2")).output().unwrap();
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(text.contains("DIRECT_LIGHT_R is not computed by fbksd-mitsuba"), "{text}");

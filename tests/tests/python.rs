@@ -4,7 +4,7 @@
 //! (plain scene-info values, zero-copy tiles, clear errors); the type stubs
 //! match the native module.
 
-use fbksd_tests::{analytic_scene, bin, python_path, sdk};
+use fbksd_tests::{analytic_scene, bin, python_path, sdk, write_script};
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -14,6 +14,22 @@ fn python(script: &Path, args: &[&str]) -> Output {
 
 fn fbksd_run(args: &[String]) -> Output {
     Command::new(bin("fbksd")).arg("run").args(args).env("PYTHONPATH", python_path()).output().unwrap()
+}
+
+/// `fbksd run` of one technique on the ramp renderer (`sdk/python/examples/ramp_renderer.py`).
+fn ramp_run(technique: String, scene: &Path, spp: &str, results: &Path) -> Output {
+    fbksd_run(&[
+        "-t".into(),
+        technique,
+        "-r".into(),
+        sdk("python/examples/ramp_renderer.py").display().to_string(),
+        "-s".into(),
+        scene.display().to_string(),
+        "--spp".into(),
+        spp.into(),
+        "--results".into(),
+        results.display().to_string(),
+    ])
 }
 
 fn read(results: &Path, technique: &str, scene: &str, spp: u32) -> Vec<f32> {
@@ -63,18 +79,7 @@ fn a_renderer_written_in_python_serves_exact_samples_to_a_technique() {
     let dir = tempfile::tempdir().unwrap();
     let scene = analytic_scene(dir.path(), "ramp", 24, 10);
     let results = dir.path().join("results");
-    let output = fbksd_run(&[
-        "-t".into(),
-        format!("box={}", bin("box-filter")),
-        "-r".into(),
-        sdk("python/examples/ramp_renderer.py").display().to_string(),
-        "-s".into(),
-        scene.display().to_string(),
-        "--spp".into(),
-        "1,16".into(),
-        "--results".into(),
-        results.display().to_string(),
-    ]);
+    let output = ramp_run(format!("box={}", bin("box-filter")), &scene, "1,16", &results);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     for (spp, slack) in [(1, 0.5), (16, 0.5 / 4.0)] {
         let image = read(&results, "box", "ramp", spp);
@@ -99,24 +104,11 @@ fn a_python_renderer_that_refuses_a_feature_says_so() {
     let dir = tempfile::tempdir().unwrap();
     let scene = analytic_scene(dir.path(), "ramp", 8, 8);
     let script = dir.path().join("depth.py");
-    std::fs::write(
+    write_script(
         &script,
         "#!/usr/bin/env python3\nimport fbksd.client as fc\nc = fc.BenchmarkClient()\nc.set_sample_layout(['COLOR_R', 'DEPTH'])\nc.evaluate_samples(1, lambda t, o: None)\nc.send_result()\n",
-    )
-    .unwrap();
-    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
-    let output = fbksd_run(&[
-        "-t".into(),
-        format!("depth={}", script.display()),
-        "-r".into(),
-        sdk("python/examples/ramp_renderer.py").display().to_string(),
-        "-s".into(),
-        scene.display().to_string(),
-        "--spp".into(),
-        "1".into(),
-        "--results".into(),
-        dir.path().join("results").display().to_string(),
-    ]);
+    );
+    let output = ramp_run(format!("depth={}", script.display()), &scene, "1", &dir.path().join("results"));
     let text = format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
     assert!(text.contains("DEPTH is not computed by the ramp renderer"), "{text}");
 }

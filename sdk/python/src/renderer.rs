@@ -128,8 +128,11 @@ fn evaluate(eval: &Evaluation, fill: &Py<PyAny>) -> Result<(), BoxError> {
         let data = pipe.raw().as_mut_ptr();
         Python::attach(|py| -> PyResult<()> {
             let keep = Bound::new(py, RendererMapping(guard.clone()))?;
-            let drawn: Vec<Vec<f64>> = drawn.iter().map(|p| p.to_vec()).collect();
-            let positions = PyArray2::from_vec2(py, &drawn).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+            // One flat buffer for the (n, 7) array, not a vector per row.
+            let flat: Vec<f64> = drawn.into_iter().flatten().collect();
+            let positions = numpy::ndarray::Array2::from_shape_vec((n, 7), flat)
+                .map(|a| PyArray2::from_owned_array(py, a))
+                .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
             // SAFETY: the pipe's n·size floats, in shared memory that `keep` keeps mapped;
             // this thread alone writes them until the pipe is finished.
             let view = unsafe { ArrayView2::from_shape_ptr((n, size), data as *const f32) };
