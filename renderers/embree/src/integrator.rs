@@ -427,11 +427,6 @@ impl Batch {
     }
 }
 
-/// Traces one camera path (a batch of one).
-pub fn trace(scene: &Scene, pos: &Position, dims: &Dimensions, wanted: &Wanted) -> SampleValues {
-    Batch::default().trace(scene, [(*pos, *dims)], wanted).next().expect("one path in, one out")
-}
-
 /// `a / b` per channel, 0 where `b` is 0.
 #[inline]
 fn share(a: Vec3, b: Vec3) -> Vec3 {

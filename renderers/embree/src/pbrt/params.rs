@@ -148,15 +148,6 @@ impl ParamSet {
         self.params.iter().find(|p| p.name == name)
     }
 
-    /// Gives parameter `name` of type `ty` these values unless it is given
-    /// (a pbrt-v3 default that pbrt-v4 changed).
-    pub fn default_to(&mut self, ty: &str, name: &str, values: Values) {
-        if !self.has(name) {
-            let loc = self.loc.clone();
-            self.params.push(Param { ty: ty.into(), name: name.into(), values, loc, used: Cell::new(false) });
-        }
-    }
-
     /// Marks `name` as read without reading it (a hint this renderer has
     /// no use for); whether it was given.
     pub fn ignore(&self, name: &str) -> bool {
