@@ -138,6 +138,7 @@ fn run() -> anyhow::Result<()> {
         (Some(Command::Reference { scenes, force, key, spp }), _) => {
             for dir in scenes {
                 let meta = reference::SceneMeta::load(&dir)?;
+                meta.expect_renderer("embree").map_err(anyhow::Error::msg)?;
                 if key {
                     println!("{} {}", reference::key(&meta, spp)?, dir.display());
                     continue;

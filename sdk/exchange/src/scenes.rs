@@ -193,6 +193,20 @@ impl SceneMeta {
         path.join(META_FILE).is_file() || path.file_name().is_some_and(|n| n == META_FILE)
     }
 
+    /// Checks that the scene is `renderer`'s, for its `reference` command:
+    /// another renderer's scene is named with the program that makes it.
+    pub fn expect_renderer(&self, renderer: &str) -> Result<(), String> {
+        if self.renderer == renderer {
+            return Ok(());
+        }
+        Err(format!(
+            "{}: a scene of the {} renderer (its {META_FILE}), not of fbksd-{renderer}: make its reference with fbksd-{} reference",
+            self.dir.display(),
+            self.renderer,
+            self.renderer
+        ))
+    }
+
     /// The scene file.
     pub fn scene_file(&self) -> PathBuf {
         self.dir.join(&self.path)
@@ -239,5 +253,15 @@ mod tests {
         ] {
             assert_ne!(key, other);
         }
+    }
+
+    #[test]
+    fn a_renderer_refuses_another_renderers_scene_and_names_the_right_program() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/experimental/spheres-sky");
+        let meta = SceneMeta::load(&dir).unwrap();
+        assert_eq!(meta.expect_renderer("mitsuba"), Ok(()));
+        let message = meta.expect_renderer("procedural").unwrap_err();
+        assert!(message.contains("a scene of the mitsuba renderer"), "{message}");
+        assert!(message.ends_with("make its reference with fbksd-mitsuba reference"), "{message}");
     }
 }

@@ -13,7 +13,7 @@
 use fbksd_core::layout::{Element, ElementIo};
 use fbksd_core::scene_info::SceneValue;
 use fbksd_core::Tile;
-use fbksd_renderer::sampler::{mix, Sampler, Strata};
+use fbksd_renderer::sampler::{Dimensions, Sampler, Strata};
 use fbksd_renderer::{Evaluation, MappingGuard, RenderingServer};
 use numpy::ndarray::ArrayView2;
 use numpy::{PyArray2, PyUntypedArrayMethods};
@@ -66,8 +66,16 @@ fn scene_info(dict: &Bound<'_, PyAny>) -> PyResult<fbksd_core::SceneInfo> {
 }
 
 /// Draws the positions of a tile's samples (rows of 7 random parameters),
-/// writing OUTPUT parameters into the samples and taking INPUT ones from them.
-fn positions(eval: &Evaluation, sampler: &Sampler, tile: Tile, first: u64, samples: &mut [f32]) -> Vec<[f64; 7]> {
+/// writing OUTPUT parameters into the samples and taking INPUT ones from
+/// them, and each sample's key ([`Dimensions::key`]) for the renderer's own
+/// random numbers.
+fn positions(
+    eval: &Evaluation,
+    sampler: &Sampler,
+    tile: Tile,
+    first: u64,
+    samples: &mut [f32],
+) -> (Vec<[f64; 7]>, Vec<u64>) {
     let layout = eval.layout();
     let size = layout.sample_size();
     let inputs = layout.input_offsets();
@@ -81,6 +89,7 @@ fn positions(eval: &Evaluation, sampler: &Sampler, tile: Tile, first: u64, sampl
         })
         .collect();
     let mut drawn = Vec::with_capacity(tile.sample_count() as usize);
+    let mut keys = Vec::with_capacity(tile.sample_count() as usize);
     match tile {
         Tile::Pixels { rect, spp } => {
             let strata = Strata::new(spp as u64);
@@ -89,11 +98,15 @@ fn positions(eval: &Evaluation, sampler: &Sampler, tile: Tile, first: u64, sampl
                     let pixel = sampler.pixel(x, y);
                     for s in 0..spp as u64 {
                         drawn.push(sampler.pixel_sample(&pixel, &strata, s, 0x7F));
+                        keys.push(Dimensions::of_pixel_sample(&pixel, s).key());
                     }
                 }
             }
         }
-        Tile::Samples { count } => drawn.extend((first..first + count).map(|i| sampler.free_sample(i))),
+        Tile::Samples { count } => {
+            drawn.extend((first..first + count).map(|i| sampler.free_sample(i)));
+            keys.extend((first..first + count).map(|i| Dimensions::of_free_sample(sampler, i).key()));
+        }
     }
     for (p, sample) in drawn.iter_mut().zip(samples.chunks_exact_mut(size)) {
         for (d, input) in inputs.iter().enumerate() {
@@ -105,16 +118,7 @@ fn positions(eval: &Evaluation, sampler: &Sampler, tile: Tile, first: u64, sampl
             sample[offset] = p[d] as f32;
         }
     }
-    drawn
-}
-
-/// A seed for a tile: the same tile of the same request gives the same one.
-fn tile_seed(request: u64, tile: Tile, first: u64) -> u64 {
-    let key = match tile {
-        Tile::Pixels { rect, spp } => mix(((rect.x0 as u64) << 32 | rect.y0 as u64) ^ mix(spp as u64)),
-        Tile::Samples { .. } => mix(first ^ 0xF2EE),
-    };
-    mix(key ^ mix(request)) >> 33
+    (drawn, keys)
 }
 
 fn evaluate(eval: &Evaluation, fill: &Py<PyAny>) -> Result<(), BoxError> {
@@ -124,7 +128,7 @@ fn evaluate(eval: &Evaluation, fill: &Py<PyAny>) -> Result<(), BoxError> {
     for (tile, first) in eval.plan_with_free_starts() {
         let mut pipe = eval.pipe(tile)?;
         let n = pipe.len() as usize;
-        let drawn = positions(eval, &sampler, tile, first, pipe.raw());
+        let (drawn, keys) = positions(eval, &sampler, tile, first, pipe.raw());
         let data = pipe.raw().as_mut_ptr();
         Python::attach(|py| -> PyResult<()> {
             let keep = Bound::new(py, RendererMapping(guard.clone()))?;
@@ -153,7 +157,7 @@ fn evaluate(eval: &Evaluation, fill: &Py<PyAny>) -> Result<(), BoxError> {
                     info.set_item("first", first)?;
                 }
             }
-            info.set_item("seed", tile_seed(eval.request, tile, first))?;
+            info.set_item("keys", numpy::PyArray1::from_vec(py, keys))?;
             fill.call1(py, (info, positions, samples))?;
             Ok(())
         })
@@ -213,7 +217,26 @@ impl PyRenderingServer {
 }
 
 /// Adds the renderer side to the module.
+/// A scene's digest ([`fbksd_exchange::scenes::scene_digest`]): what a
+/// Python renderer's reference note records, by the rule every renderer shares.
+#[pyfunction]
+fn scene_digest(scene_file: std::path::PathBuf) -> PyResult<String> {
+    fbksd_exchange::scenes::scene_digest(&scene_file)
+        .map_err(|e| pyo3::exceptions::PyOSError::new_err(format!("{}: {e}", scene_file.display())))
+}
+
+/// A reference's key ([`fbksd_exchange::scenes::reference_key`]), which a
+/// renderer prints for `reference --key`.
+#[pyfunction]
+fn reference_key(generator: &str, samples_per_pixel: u64, scene_digest: &str) -> String {
+    fbksd_exchange::scenes::reference_key(generator, samples_per_pixel, scene_digest)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderingServer>()?;
+    m.add_function(wrap_pyfunction!(scene_digest, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_key, m)?)?;
+    m.add("FEATURE_BUFFERS", fbksd_exchange::scenes::FEATURE_BUFFERS.to_vec())?;
+    m.add("FEATURE_BUFFER_SPP", fbksd_exchange::scenes::FEATURE_BUFFER_SPP)?;
     Ok(())
 }

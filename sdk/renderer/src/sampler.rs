@@ -446,6 +446,14 @@ impl Dimensions {
         Dimensions { seed: mix(mix(u64::MAX - sampler.request) ^ mix(index ^ 0x8CB9_2BA7_2F3D_8DD7)) }
     }
 
+    /// The 64-bit key every dimension is hashed from: a renderer with its
+    /// own random numbers (Mitsuba's, through `fbksd.renderer`) derives
+    /// them from it, so each sample stays a pure function of its indices.
+    #[inline]
+    pub fn key(&self) -> u64 {
+        self.seed
+    }
+
     /// Dimension `d` (any number; the caller numbers its own).
     #[inline(always)]
     pub fn get(&self, d: u32) -> f32 {

@@ -1,5 +1,6 @@
 """Type stubs of the native module behind fbksd.client (checked by mypy.stubtest in the tests)."""
 
+import os
 from typing import Any, Callable, Literal, Sequence, Tuple, Union, final
 
 import numpy as np
@@ -10,7 +11,18 @@ _LayoutElement = Union[str, Tuple[str, int], Tuple[str, Literal["INPUT", "OUTPUT
 _TileCallback = Callable[[_Array, Tuple[int, int]], object]
 _SamplesCallback = Callable[[_Array], object]
 
-__all__ = ["BenchmarkClient", "SceneInfo", "FbksdError", "INPUT", "OUTPUT", "RenderingServer"]
+__all__ = [
+    "BenchmarkClient",
+    "SceneInfo",
+    "FbksdError",
+    "INPUT",
+    "OUTPUT",
+    "RenderingServer",
+    "scene_digest",
+    "reference_key",
+    "FEATURE_BUFFERS",
+    "FEATURE_BUFFER_SPP",
+]
 
 INPUT: Literal["INPUT"]
 OUTPUT: Literal["OUTPUT"]
@@ -40,6 +52,9 @@ class BenchmarkClient:
     def send_result(self) -> None: ...
 
 _Positions = npt.NDArray[np.float64]
+# x0, y0, x1, y1, spp (pixel tiles) or first, count (free samples): int;
+# keys: (n,) uint64, one per sample.
+_Tile = dict[str, Union[int, npt.NDArray[np.uint64]]]
 # (name, number, offset, "INPUT" | "OUTPUT") per layout element.
 _Element = Tuple[str, int, int, str]
 
@@ -48,8 +63,14 @@ class RenderingServer:
     def __new__(
         cls,
         scene_info: Callable[[], dict[str, Any]],
-        fill: Callable[[dict[str, int], _Positions, _Array], object],
+        fill: Callable[[_Tile, _Positions, _Array], object],
         set_layout: Callable[[list[_Element]], object] | None = None,
         tile_size: int = 32,
     ) -> RenderingServer: ...
     def run(self) -> None: ...
+
+def scene_digest(scene_file: str | os.PathLike[str]) -> str: ...
+def reference_key(generator: str, samples_per_pixel: int, scene_digest: str) -> str: ...
+
+FEATURE_BUFFERS: list[str]
+FEATURE_BUFFER_SPP: int

@@ -19,9 +19,11 @@ The counterpart of the original C++ ``RenderingServer`` and
         # by the SDK's stratified sampler (INPUT values are the technique's);
         # samples: (n, sample_size) float32, a zero-copy view of the shared
         # tile: write every OUTPUT feature. tile: x0, y0, x1, y1, spp for
-        # pixel tiles or first, count for free samples; seed, for the
-        # renderer's own random numbers (the same tile of the same request
-        # gets the same seed).
+        # pixel tiles or first, count for free samples; keys, (n,) uint64,
+        # one per sample, for the renderer's own random numbers (a pure
+        # function of the request, the pixel and the sample's index, as the
+        # built-in renderers' are: derive them from it and any sample
+        # replays, whatever tile it comes in).
         samples[:, 2] = positions[:, 0] / 64.0
 
     fr.RenderingServer(scene_info, fill, set_layout).run()
@@ -30,11 +32,19 @@ The OUTPUT random parameters are already written into ``samples``; the
 renderer writes features only. An exception in a callback ends the request
 with the exception's message and traceback for the technique and the
 manager's log.
+
+A renderer whose scenes join a service's pool also makes their
+references (``fbksd-<renderer> reference [--key] DIR...``, as
+``fbksd-mitsuba`` does): ``scene_digest`` and ``reference_key`` are the
+rules every renderer shares for the note beside a reference
+(``reference.json``: ``generator``, ``samples_per_pixel``,
+``scene_digest``), and ``FEATURE_BUFFERS`` at ``FEATURE_BUFFER_SPP`` the
+feature images made with it.
 """
 
-from fbksd._native import RenderingServer
+from fbksd._native import FEATURE_BUFFER_SPP, FEATURE_BUFFERS, RenderingServer, reference_key, scene_digest
 
 # The order of the columns of ``positions``.
 PARAMETERS = ("IMAGE_X", "IMAGE_Y", "LENS_U", "LENS_V", "TIME", "LIGHT_X", "LIGHT_Y")
 
-__all__ = ["RenderingServer", "PARAMETERS"]
+__all__ = ["RenderingServer", "PARAMETERS", "scene_digest", "reference_key", "FEATURE_BUFFERS", "FEATURE_BUFFER_SPP"]
