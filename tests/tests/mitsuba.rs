@@ -1,8 +1,10 @@
 //! Mitsuba 3 behind the protocol (`renderers/mitsuba/fbksd-mitsuba`, on
 //! `fbksd.renderer`): a scene served to `fbksd run` agrees with Mitsuba's
 //! own `mi.render`; the first hit's features and INPUT positions come
-//! through; features it cannot compute are refused with a message; and
-//! Mitsuba agrees with our Embree path tracer on the Cornell box.
+//! through; features it cannot compute are refused with a message;
+//! Mitsuba agrees with our Embree path tracer on the Cornell box; a sample
+//! replays whatever it is evaluated with; and references follow the
+//! renderers' shared rule.
 
 use fbksd_tests::{bin, python_path, run, sdk, write_script};
 use std::path::{Path, PathBuf};
@@ -34,7 +36,7 @@ fn means(path: &Path) -> [f64; 3] {
 #[test]
 fn a_scene_served_to_fbksd_run_agrees_with_mitsubas_own_render() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = repo("scenes/mitsuba/spheres-sky/scene.xml");
+    let scene = repo("scenes/experimental/spheres-sky/scene.xml");
     run(&mut fbksd_run(&format!("box={}", bin("box-filter")), &scene, 64, &dir.path().join("results")));
     let ours = means(&dir.path().join("results/box/scene/64_0.exr"));
     // Mitsuba's own render of the same file, at more samples.
@@ -54,7 +56,7 @@ fn a_scene_served_to_fbksd_run_agrees_with_mitsubas_own_render() {
 #[test]
 fn features_and_input_positions_come_through_and_unknown_features_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = repo("scenes/mitsuba/spheres-sky/scene.xml");
+    let scene = repo("scenes/experimental/spheres-sky/scene.xml");
     // Every sample at the image centre (INPUT): the same camera ray, so the
     // same first hit: the middle sphere, rough gold, whose albedo Mitsuba
     // reports; the normal faces the viewer.
@@ -117,4 +119,84 @@ fn mitsuba_and_the_embree_path_tracer_agree_on_the_cornell_box() {
     for c in 0..3 {
         assert!((a[c] - b[c]).abs() < 0.01 * b[c], "channel {c}: Embree {} vs Mitsuba {}", a[c], b[c]);
     }
+}
+
+#[test]
+fn a_sample_has_the_same_value_in_any_batch_and_order() {
+    // Mitsuba draws each sample's random numbers from the key the SDK gives
+    // it, so a sample's value does not depend on its neighbours: the same
+    // samples evaluated at once, and reversed in batches of 173, agree bit for
+    // bit; other keys give other paths.
+    let script = format!(
+        r#"
+import importlib.machinery, importlib.util
+import numpy as np
+loader = importlib.machinery.SourceFileLoader("fbksd_mitsuba", {mitsuba:?})
+spec = importlib.util.spec_from_loader("fbksd_mitsuba", loader)
+m = importlib.util.module_from_spec(spec)
+loader.exec_module(m)
+r = m.Renderer({scene:?})
+rng = np.random.default_rng(7)
+n = 1500
+positions = rng.random((n, 7))
+positions[:, 0] *= r.width
+positions[:, 1] *= r.height
+keys = rng.integers(0, 2**63, n, dtype=np.uint64)
+together, aov = r.evaluate(positions, keys, True, True)
+order = np.arange(n)[::-1]
+parts = [r.evaluate(positions[order[i:i + 173]], keys[order[i:i + 173]], True, True) for i in range(0, n, 173)]
+apart = np.concatenate([p[0] for p in parts], axis=1)[:, np.argsort(order)]
+apart_aov = np.concatenate([p[1] for p in parts], axis=1)[:, np.argsort(order)]
+assert np.array_equal(together, apart), np.abs(together - apart).max()
+assert np.array_equal(aov, apart_aov)
+other, _ = r.evaluate(positions, keys ^ np.uint64(1), True, False)
+assert (other != together).any(axis=0).mean() > 0.5, "other keys, other paths"
+print("replay ok")
+"#,
+        mitsuba = mitsuba(),
+        scene = repo("scenes/experimental/spheres-sky/scene.xml").display().to_string()
+    );
+    let out = run(Command::new("python3").args(["-c", &script]).env("PYTHONPATH", python_path()));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("replay ok"));
+}
+
+#[test]
+fn references_follow_the_rule_every_renderer_shares() {
+    // A copy of a pool scene at 16 spp: `reference --key` prints the key the
+    // note of the reference it then makes has (as the runner checks), with
+    // the feature buffers beside it; a second call keeps it.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("spheres-sky");
+    std::fs::create_dir(&scene).unwrap();
+    for name in ["scene.xml", "fbksd-scene.json"] {
+        std::fs::copy(repo("scenes/experimental/spheres-sky").join(name), scene.join(name)).unwrap();
+    }
+    let meta = std::fs::read_to_string(scene.join("fbksd-scene.json")).unwrap();
+    std::fs::write(scene.join("fbksd-scene.json"), meta.replace("\"spp\": 4096", "\"spp\": 16")).unwrap();
+    let reference = |args: &[&str]| {
+        let out = run(Command::new(mitsuba()).arg("reference").args(args).arg(&scene).env("PYTHONPATH", python_path()));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let key = reference(&["--key"]);
+    let key = key.split_whitespace().next().unwrap().to_string();
+    assert!(key.starts_with("sha256:"), "{key}");
+    let made = reference(&[]);
+    assert!(made.contains("16 spp, estimated RMS error"), "{made}");
+    let note = std::fs::read(scene.join("reference.json")).unwrap();
+    assert_eq!(fbksd_exchange::scenes::note_reference_key(&note).unwrap(), key);
+    let (w, h, rgb) = fbksd_iqa::image::read_exr(&scene.join("reference.exr")).unwrap();
+    assert_eq!((w, h), (256, 192));
+    assert!(rgb.iter().all(|v| v.is_finite()) && rgb.iter().any(|v| *v > 0.0));
+    for buffer in fbksd_exchange::scenes::FEATURE_BUFFERS {
+        let (bw, bh, values) = fbksd_iqa::image::read_exr(&scene.join(format!("reference-{buffer}.exr"))).unwrap();
+        assert_eq!((bw, bh), (w, h), "{buffer}");
+        assert!(values.iter().any(|v| *v != 0.0), "{buffer} is all zero");
+    }
+    // Kept: the same note, not rendered again.
+    let modified = std::fs::metadata(scene.join("reference.exr")).unwrap().modified().unwrap();
+    reference(&[]);
+    assert_eq!(std::fs::metadata(scene.join("reference.exr")).unwrap().modified().unwrap(), modified);
+    // The scene's files changed: another key.
+    std::fs::write(scene.join("scene.xml"), std::fs::read_to_string(scene.join("scene.xml")).unwrap() + "\n").unwrap();
+    assert_ne!(reference(&["--key"]).split_whitespace().next().unwrap(), key);
 }
