@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Every baseline of sdk/techniques/baselines.txt on the service's default
-# scene pool (the seven experimental scenes and the small Cornell box) at
+# scene pool (the nine experimental scenes and the small Cornell box) at
 # 4, 16 and 64 spp, through `fbksd run` with release binaries, as the
 # service would benchmark them; then the metrics, and a table in the form
 # of the thesis's figure 6.6: rMSE, PSNR, SSIM, FLIP, technique time and
@@ -23,12 +23,7 @@ work=$PWD/target/bench-baselines
 source deploy/bench-env.sh
 bench_env "$work"
 
-for scene in "${scenes[@]}"; do
-    case "$scene" in
-        *experimental*) target/release/fbksd-procedural reference "$scene" >&2 ;;
-        *) target/release/fbksd-embree reference "$scene" >&2 ;;
-    esac
-done
+make_references "${scenes[@]}"
 
 # Each baseline built as the service builds it (CMake, Release) or run as it is.
 techniques=()

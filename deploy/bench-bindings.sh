@@ -15,7 +15,7 @@ cd "$(dirname "$0")/.."
 repeats=${1:-3}
 root=$PWD
 work=$root/target/bench-bindings
-rm -rf "$work" && mkdir -p "$work/python/fbksd"
+rm -rf "$work" && mkdir -p "$work"
 
 cargo build --release --locked --workspace >&2
 bash deploy/install-sdk.sh "$work/sdk" target/release >&2
@@ -23,8 +23,9 @@ cmake -S sdk/techniques/box-filter-cpp -B "$work/build" -DCMAKE_BUILD_TYPE=Relea
     -DCMAKE_PREFIX_PATH="$work/sdk" >&2
 cmake --build "$work/build" >&2
 # The Python package as pip would install it: sources and the release native module.
-cp sdk/python/python/fbksd/*.py "$work/python/fbksd/"
-cp target/release/lib_native.so "$work/python/fbksd/_native.so"
+say() { echo "bench-bindings: $*" >&2; }
+. deploy/lib/images.sh
+stage_python_sdk "$work/python" target/release
 export PYTHONPATH=$work/python
 # The techniques' `#!/usr/bin/env python3` finds the interpreter itself, as in
 # a sandbox, not a version manager's shim before it (pyenv's costs 70 ms a

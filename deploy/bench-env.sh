@@ -6,15 +6,17 @@
 
 # Builds the release binaries, installs the SDK into WORK/sdk and the Python
 # package (sources and the release native module) into WORK/python, which
-# PYTHONPATH then names; WORK/results starts empty.
+# PYTHONPATH then names; puts the renderers on PATH (make_references);
+# WORK/results starts empty.
 bench_env() {
     local work=$1
-    rm -rf "$work/results" && mkdir -p "$work/python/fbksd"
+    rm -rf "$work/results" && mkdir -p "$work"
     cargo build --release --locked --workspace --bins --lib >&2
     bash deploy/install-sdk.sh "$work/sdk" target/release >&2
-    cp sdk/python/python/fbksd/*.py "$work/python/fbksd/"
-    cp target/release/lib_native.so "$work/python/fbksd/_native.so"
-    export PYTHONPATH=$work/python
+    say() { echo "bench: $*" >&2; }
+    . deploy/lib/images.sh
+    . deploy/lib/renderers.sh
+    renderers_on_path "$(pwd)/target/release" "$work/python"
     bench_work=$work
 }
 

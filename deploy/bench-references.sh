@@ -10,7 +10,8 @@
 # The binaries are target/release's unless --bin-dir names others (the
 # tests' debug build is optimised too); the job images must exist
 # (deploy/build-images.sh, whose manifest is read from the bin directory or
-# fbksd-data/images.json). The default pool is serve.sh's eight scenes.
+# fbksd-data/images.json). The default pool is serve.sh's scenes but the two
+# Mitsuba ones.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=$(pwd)/target/release

@@ -7,7 +7,10 @@
 #   python    base + Python 3, the FBKSD Python SDK, numpy, scipy, OpenEXR
 #             and pyoidn (wheels pinned in deploy/images/python/requirements.txt,
 #             downloaded here on the host and cached in ~/.cache/fbksd/wheels)
-#   renderer  base + the built-in renderers and the scene files (no references)
+#   renderer  base + the built-in renderers (procedural, Embree, and Mitsuba 3
+#             behind fbksd-mitsuba, its wheels pinned in
+#             deploy/images/renderer/requirements.txt) and the scene files
+#             (no references)
 # Each tag is a hash of the image's content (its Dockerfile, the files it
 # copies and its base; deploy/lib/images.sh), so an unchanged image is never rebuilt. The
 # manifest (JSON) names the four tags; fbksd-ci reads it (--images).
@@ -62,23 +65,13 @@ stage_cpp() {
     bash deploy/install-sdk.sh "$1/sdk" "$bin_dir" >/dev/null
 }
 stage_python() {
-    local wheels=${XDG_CACHE_HOME:-$HOME/.cache}/fbksd/wheels
-    mkdir -p "$1/fbksd" "$1/wheels" "$wheels"
-    cp deploy/images/python/requirements.txt "$1/"
-    # Only what requirements.txt names, so a stale cached wheel never changes the image.
-    python3 -m pip download --quiet --disable-pip-version-check --only-binary=:all: \
-        --dest "$wheels" -r deploy/images/python/requirements.txt >&2
-    grep -E '^[A-Za-z]' deploy/images/python/requirements.txt | while IFS='=' read -r name _ version; do
-        file=$(ls "$wheels" | grep -i "^$(echo "$name" | tr '-' '_')-$version-" | head -1)
-        [ -n "$file" ] || { say "no wheel for $name $version in $wheels"; exit 1; }
-        cp "$wheels/$file" "$1/wheels/"
-    done
-    cp sdk/python/python/fbksd/*.py sdk/python/python/fbksd/*.pyi sdk/python/python/fbksd/py.typed "$1/fbksd/"
-    cp "$bin_dir/lib_native.so" "$1/fbksd/_native.so"
+    stage_wheels "$1/wheels" deploy/images/python/requirements.txt
+    stage_python_sdk "$1" "$bin_dir"
 }
 stage_renderer() {
     mkdir -p "$1/bin" "$1/scenes"
     cp "$bin_dir/fbksd-procedural" "$bin_dir/fbksd-embree" "$1/bin/"
+    stage_mitsuba "$1/mitsuba" "$bin_dir"
     stage_scenes "$1/scenes"
 }
 

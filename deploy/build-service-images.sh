@@ -2,7 +2,8 @@
 # Builds the images of the service itself, with no registry, on top of the
 # job images of deploy/build-images.sh (run first, with the same binaries):
 #   server    fbksd-server, git, the PostgreSQL client (backups), curl
-#   runner    fbksd-ci, the renderers, git, the scene files (no references)
+#   runner    the renderer image (the renderers, the scene files without
+#             references) + fbksd-ci and git
 #             and the job images' manifest
 #   postgres  PostgreSQL from Debian's packages
 # all FROM the same Debian base. Each tag is a hash of the image's content
@@ -45,7 +46,8 @@ done
 # The job images and the base, from the same binaries.
 bash deploy/build-images.sh --bin-dir "$bin_dir" --manifest "$manifest"
 base=$(sed -n 's/.*"base": *"\([^"]*\)".*/\1/p' "$manifest")
-[ -n "$base" ] || { say "no base image in $manifest"; exit 1; }
+renderer=$(sed -n 's/.*"renderer": *"\([^"]*\)".*/\1/p' "$manifest")
+[ -n "$base" ] && [ -n "$renderer" ] || { say "no base or renderer image in $manifest"; exit 1; }
 
 stage=$(mktemp -d)
 trap 'rm -rf "$stage"' EXIT
@@ -57,17 +59,19 @@ stage_server() {
 }
 stage_runner() {
     mkdir -p "$1/bin"
-    cp "$bin_dir/fbksd-ci" "$bin_dir/fbksd-procedural" "$bin_dir/fbksd-embree" "$1/bin/"
+    cp "$bin_dir/fbksd-ci" "$1/bin/"
     cp deploy/images/runner/entrypoint.sh deploy/images/secrets.sh "$1/"
     cp "$manifest" "$1/images.json"
-    stage_scenes "$1/scenes"
 }
 stage_postgres() {
     cp deploy/images/postgres/entrypoint.sh "$1/"
 }
 
 declare -A tags
-build_images "$base" server runner postgres
+build_images "$base" server postgres
+# The runner is the renderer image and fbksd-ci: the renderers and scene
+# files it makes references with are those its jobs run.
+build_images "$renderer" runner
 
 variables="FBKSD_IMAGE_SERVER=${tags[server]}
 FBKSD_IMAGE_RUNNER=${tags[runner]}

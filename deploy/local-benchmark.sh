@@ -8,8 +8,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --locked --workspace --bins
 bin=target/release
-"$bin/fbksd-procedural" reference scenes/experimental/*
-"$bin/fbksd-embree" reference scenes/production-small/*
+say() { echo "local-benchmark: $*" >&2; }
+. deploy/lib/images.sh
+. deploy/lib/renderers.sh
+renderers_on_path "$(pwd)/$bin" "$(pwd)/$bin/python-sdk"
+make_references scenes/experimental/* scenes/production-small/*
 scenes=()
 for dir in scenes/experimental/*/ scenes/production-small/*/; do
     scenes+=(--scene "$dir")

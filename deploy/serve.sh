@@ -88,10 +88,16 @@ done
 echo "serve: the service answers; building the runner and its images (jobs wait in the queue meanwhile)" >&2
 build -p fbksd-ci -p fbksd-capi -p fbksd-python -p fbksd-procedural -p fbksd-embree
 bash deploy/build-images.sh --bin-dir "$bin" --manifest "$data/images.json"
+# The runner makes the Mitsuba scenes' references here with fbksd-mitsuba,
+# which imports the Python SDK just built (Mitsuba itself: deploy/setup.sh).
+say() { echo "serve: $*" >&2; }
+. deploy/lib/images.sh
+. deploy/lib/renderers.sh
+renderers_on_path "$bin" "$data/python-sdk"
 
-# The runner's scene pool (default: the experimental scenes and the small
-# Cornell box); it makes the missing references before it takes jobs.
-: "${FBKSD_CI_SCENES:=experimental/black-ring,experimental/defocus-checkerboard,experimental/fireflies,experimental/mandelbrot,experimental/moving-bars,experimental/sin-bands,experimental/sphere,production-small/cornell-box}"
+# The runner's scene pool (default: the experimental scenes, two of them
+# Mitsuba's, and the small Cornell box); it makes the missing references before it takes jobs.
+: "${FBKSD_CI_SCENES:=experimental/black-ring,experimental/defocus-checkerboard,experimental/fireflies,experimental/glass-floor,experimental/mandelbrot,experimental/moving-bars,experimental/sin-bands,experimental/sphere,experimental/spheres-sky,production-small/cornell-box}"
 export FBKSD_CI_SCENES
 export FBKSD_CI_SCENE_ROOT=${FBKSD_CI_SCENE_ROOT:-$(pwd)/scenes}
 # The token through the environment: a command line is readable by every user of the machine.

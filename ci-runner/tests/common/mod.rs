@@ -16,8 +16,21 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// The CI scene set: both built-in renderers, closed-form and rendered references.
-pub const CI_SCENES: &[&str] = &["experimental/sphere", "experimental/fireflies", "production-small/cornell-box"];
+/// The CI scene set: every renderer (procedural, Embree, Mitsuba 3),
+/// closed-form and rendered references.
+pub const CI_SCENES: &[&str] =
+    &["experimental/sphere", "experimental/fireflies", "production-small/cornell-box", "experimental/spheres-sky"];
+
+/// What a runner on this machine needs to find fbksd-mitsuba, as
+/// `deploy/serve.sh` gives it: the program on PATH and the Python SDK of
+/// this build on PYTHONPATH.
+pub fn renderer_env() -> Vec<(&'static str, String)> {
+    let path = std::env::var("PATH").unwrap_or_default();
+    vec![
+        ("PATH", format!("{}:{path}", workspace().join("renderers/mitsuba").display())),
+        ("PYTHONPATH", fbksd_tests::python_path().display().to_string()),
+    ]
+}
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
@@ -33,10 +46,12 @@ fn locked(lock: &str, command: &mut Command) {
     let lock_file = bin_dir().join(lock);
     let program = command.get_program().to_owned();
     let args: Vec<_> = command.get_args().map(|a| a.to_owned()).collect();
+    let envs: Vec<_> = command.get_envs().filter_map(|(k, v)| Some((k.to_owned(), v?.to_owned()))).collect();
     let out = Command::new("flock")
         .arg(&lock_file)
         .arg(&program)
         .args(&args)
+        .envs(envs)
         .current_dir(workspace())
         .output()
         .expect("flock runs");
@@ -64,8 +79,12 @@ pub fn references(scenes: &[&str]) {
         // feature buffers are made.
         let dir = workspace().join("scenes").join(scene);
         let meta = fbksd_exchange::scenes::SceneMeta::load(&dir).unwrap();
-        let mut make = Command::new(bin_dir().join(format!("fbksd-{}", meta.renderer)));
-        make.arg("reference").arg(&dir);
+        let program = match meta.renderer.as_str() {
+            "mitsuba" => workspace().join("renderers/mitsuba/fbksd-mitsuba"),
+            renderer => bin_dir().join(format!("fbksd-{renderer}")),
+        };
+        let mut make = Command::new(program);
+        make.arg("reference").arg(&dir).envs(renderer_env());
         locked("fbksd-references.lock", &mut make);
     }
 }
@@ -127,6 +146,7 @@ impl RunnerProcess {
             .args(["--memory-mib", &options.memory_mib.to_string(), "--renderer-memory-mib", "2048"])
             .args(["--tmpfs-mib", "64", "--pids", "64", "--poll-seconds", "1"])
             .env("RUST_LOG", "info")
+            .envs(renderer_env())
             .stdin(Stdio::null())
             .stdout(std::fs::File::create(&log).unwrap())
             .stderr(std::fs::File::options().append(true).open(&log).unwrap());
