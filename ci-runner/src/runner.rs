@@ -14,7 +14,7 @@
 //!   at start, whatever a killed predecessor left (containers with this
 //!   runner's label, job directories, rendezvous directories).
 
-use crate::api::Api;
+use crate::api::{Api, ApiError};
 use crate::images::Images;
 use crate::job::{self, Failure, JobContext, JobLog};
 use crate::machine::Machine;
@@ -300,11 +300,25 @@ async fn remove_job_dir(sandbox: &Sandbox, images: &Images, dir: &Path) {
     }
 }
 
-/// The runner's identity: kept in the work directory, or bought with the registration token.
+/// The runner's identity: kept in the work directory, or bought with the
+/// registration token. A kept identity the server no longer knows (its data
+/// directory was started afresh) is replaced when the runner has the
+/// registration token, instead of being refused on every claim.
 async fn identity(config: &RunnerConfig, api: &Api, machine: &Machine) -> anyhow::Result<RunnerCredentials> {
     let path = config.work_dir.join("runner.json");
     if let Ok(text) = std::fs::read_to_string(&path) {
-        return serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()));
+        let kept: RunnerCredentials =
+            serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        match api.status(&kept.token, Some("starting")).await {
+            Err(ApiError::Refused { status: 401, .. }) if config.registration_token.is_some() => {
+                tracing::warn!(
+                    "the server does not know the runner {} kept in {} (a new data directory?): registering again",
+                    kept.id,
+                    path.display()
+                );
+            }
+            _ => return Ok(kept),
+        }
     }
     let Some(token) = &config.registration_token else {
         anyhow::bail!(

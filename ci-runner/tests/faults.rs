@@ -1,5 +1,6 @@
 //! Faults: a runner killed mid-job, the server restarted mid-job, Docker
-//! unavailable. In each, no job and no result is lost.
+//! unavailable, a runner kept beside a server started afresh. In each, no
+//! job and no result is lost.
 
 mod common;
 
@@ -160,4 +161,27 @@ async fn without_docker_a_runner_says_so_and_claims_nothing() {
     let runner = RunnerProcess::start(&server.url, &work.path().join("runner"), &RunnerOptions::default());
     let job = finished_job(&server, &ada, &id, Duration::from_secs(300)).await;
     assert_eq!(job["state"], "succeeded", "{job}\n{}", runner.output());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_runner_kept_by_a_server_started_afresh_registers_again() {
+    images();
+    references(&["experimental/fireflies"]);
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("runner");
+    let first = spawn(Db::Sqlite).await;
+    let runner = RunnerProcess::start(&first.url, &dir, &RunnerOptions::default());
+    runner.wait_for_output(") ready: ", Duration::from_secs(120));
+    let kept = runner.id().unwrap();
+    drop(runner);
+    // The same runner directory beside a server with a new data directory
+    // (as when fbksd-data is deleted and fbksd-runner kept): the kept
+    // identity is unknown there, so the runner registers again and works.
+    let second = spawn(Db::Sqlite).await;
+    let runner = RunnerProcess::start(&second.url, &dir, &RunnerOptions::default());
+    runner.wait_for_output("registering again", Duration::from_secs(60));
+    runner.wait_for_output(") ready: ", Duration::from_secs(120));
+    assert!(runner.id().is_some_and(|id| id != kept), "{}", runner.output());
+    std::thread::sleep(Duration::from_secs(3)); // a few claims
+    assert!(!runner.output().contains("unknown runner token"), "{}", runner.output());
 }
