@@ -20,10 +20,15 @@ scenes=${1:-experimental/black-ring,experimental/defocus-checkerboard,experiment
 manifest=$bin/fbksd-test-images.json
 [ -f "$manifest" ] || manifest=$(pwd)/fbksd-data/images.json
 [ -f "$manifest" ] || { echo "bench-references: no image manifest: run deploy/build-images.sh first" >&2; exit 1; }
-for f in fbksd-server fbksd-ci; do
+for f in fbksd-server fbksd-ci lib_native.so; do
     [ -x "$bin/$f" ] || { echo "bench-references: $bin/$f is missing: cargo build --release" >&2; exit 1; }
 done
 work=$(mktemp -d)
+# A Mitsuba scene in the pool needs fbksd-mitsuba and the Python SDK on the runners' paths.
+say() { echo "bench-references: $*" >&2; }
+. deploy/lib/images.sh
+. deploy/lib/renderers.sh
+renderers_on_path "$bin" "$work/python"
 port=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 url=http://127.0.0.1:$port
 FBKSD_SERVER_DATA_DIR=$work/data FBKSD_SERVER_BIND=127.0.0.1:$port FBKSD_SERVER_RUNNER_REGISTRATION_TOKEN=bench \

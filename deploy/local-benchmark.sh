@@ -6,12 +6,12 @@
 # maps, and the ranking. Results go to ./fbksd-results.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo build --release --locked --workspace --bins
+cargo build --release --locked --workspace --bins --lib
 bin=target/release
 say() { echo "local-benchmark: $*" >&2; }
 . deploy/lib/images.sh
 . deploy/lib/renderers.sh
-renderers_on_path "$(pwd)/$bin" "$(pwd)/$bin/python-sdk"
+renderers_on_path "$(pwd)/$bin" "$(pwd)/target/local-benchmark/python"
 make_references scenes/experimental/* scenes/production-small/*
 scenes=()
 for dir in scenes/experimental/*/ scenes/production-small/*/; do

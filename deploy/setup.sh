@@ -47,8 +47,13 @@ fi
 # renderers/mitsuba/fbksd-mitsuba; and the python environment's own
 # packages, pinned as in its image (numpy, SciPy, OpenEXR, pyoidn), for the
 # baselines' tests.
-PIP_PACKAGES=(scikit-image flip-evaluator mypy mitsuba==3.9.1 -r "$(dirname "$0")/images/python/requirements.txt")
-if ! python3 -c "import numpy, scipy, OpenEXR, pyoidn, skimage, flip_evaluator, mypy, mitsuba" >/dev/null 2>&1; then
+PIP_PACKAGES=(scikit-image flip-evaluator mypy -r "$(dirname "$0")/images/renderer/requirements.txt"
+    -r "$(dirname "$0")/images/python/requirements.txt")
+# Mitsuba as pinned for the renderer image: references made here and runs in
+# the image must come from the same version (it is in their key).
+mitsuba_pin=$(sed -n 's/^mitsuba==//p' "$(dirname "$0")/images/renderer/requirements.txt")
+if ! python3 -c "import numpy, scipy, OpenEXR, pyoidn, skimage, flip_evaluator, mypy, mitsuba, sys
+sys.exit(mitsuba.__version__ != sys.argv[1])" "$mitsuba_pin" >/dev/null 2>&1; then
     if ! python3 -m pip --version >/dev/null 2>&1; then
         sudo_cmd=""
         [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"

@@ -1,5 +1,6 @@
-# Shared by build-images.sh and build-service-images.sh (sourced, from the
-# repository's root, after they define say()).
+# Image staging shared by build-images.sh and build-service-images.sh, and
+# the Python SDK staging that serve.sh and the bench scripts use too
+# (sourced, from the repository's root, after the caller defines say()).
 
 # stage_scenes DIR: the scene files as the images hold them, without
 # references (runners make or download those), generators or notes.
@@ -20,7 +21,7 @@ stage_wheels() {
     python3 -m pip download --quiet --disable-pip-version-check --only-binary=:all: \
         --dest "$wheels" -r "$requirements" >&2
     grep -E '^[A-Za-z]' "$requirements" | while IFS='=' read -r name _ version; do
-        file=$(ls "$wheels" | grep -i "^$(echo "$name" | tr '-' '_')-$version-" | head -1)
+        file=$(ls "$wheels" | grep -i "^$(echo "$name" | tr '-' '_')-$version-" | head -1 || true)
         [ -n "$file" ] || { say "no wheel for $name $version in $wheels"; exit 1; }
         cp "$wheels/$file" "$dir/"
     done

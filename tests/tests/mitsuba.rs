@@ -196,6 +196,20 @@ fn references_follow_the_rule_every_renderer_shares() {
     let modified = std::fs::metadata(scene.join("reference.exr")).unwrap().modified().unwrap();
     reference(&[]);
     assert_eq!(std::fs::metadata(scene.join("reference.exr")).unwrap().modified().unwrap(), modified);
+    // --force rebuilds it; the same seeds give the same image.
+    let before = std::fs::read(scene.join("reference.exr")).unwrap();
+    reference(&["--force"]);
+    assert_ne!(std::fs::metadata(scene.join("reference.exr")).unwrap().modified().unwrap(), modified);
+    assert_eq!(std::fs::read(scene.join("reference.exr")).unwrap(), before);
+    // Another renderer's scene is refused, naming the program that makes it.
+    let out = Command::new(mitsuba())
+        .arg("reference")
+        .arg(repo("scenes/experimental/sphere"))
+        .env("PYTHONPATH", python_path())
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && text.contains("make its reference with fbksd-procedural reference"), "{text}");
     // The scene's files changed: another key.
     std::fs::write(scene.join("scene.xml"), std::fs::read_to_string(scene.join("scene.xml")).unwrap() + "\n").unwrap();
     assert_ne!(reference(&["--key"]).split_whitespace().next().unwrap(), key);

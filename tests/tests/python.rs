@@ -313,3 +313,62 @@ fn the_package_installs_with_pip_into_a_fresh_virtualenv_and_runs_a_technique() 
         assert!((p - r).abs() <= 2e-6 * r.abs().max(1e-3), "{p} vs {r}");
     }
 }
+
+#[test]
+fn each_sample_has_one_key_whatever_tile_it_is_served_in() {
+    // A Python renderer records the key the SDK gives each pixel sample,
+    // served in tiles of 4 and then of 7 pixels: every sample has the same
+    // key both times, and no two samples share one.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = analytic_scene(dir.path(), "keys", 13, 9);
+    let renderer = dir.path().join("keys_renderer.py");
+    write_script(
+        &renderer,
+        r#"#!/usr/bin/env python3
+import json, os, sys
+import fbksd.renderer as fr
+scene = json.load(open(sys.argv[1]))
+log = open(os.environ["KEYS_LOG"], "a")
+def fill(tile, positions, samples):
+    i = 0
+    for y in range(tile["y0"], tile["y1"]):
+        for x in range(tile["x0"], tile["x1"]):
+            for s in range(tile["spp"]):
+                log.write(f"{x} {y} {s} {int(tile['keys'][i])}\n")
+                i += 1
+    assert i == len(tile["keys"]) == len(positions)
+    log.flush()
+fr.RenderingServer(lambda: {"width": scene["width"], "height": scene["height"], "max_depth": 1,
+                            "random_parameters": "IMAGE_X,IMAGE_Y"},
+                   fill, tile_size=int(os.environ["KEYS_TILE"])).run()
+"#,
+    );
+    let keys = |tile: &str| {
+        let log = dir.path().join(format!("keys-{tile}.txt"));
+        let out = Command::new(bin("fbksd"))
+            .arg("run")
+            .args(["-t", &format!("box={}", bin("box-filter")), "-r", &renderer.display().to_string()])
+            .args(["-s", &scene.display().to_string(), "--spp", "4", "--results"])
+            .arg(dir.path().join(format!("results-{tile}")))
+            .env("PYTHONPATH", python_path())
+            .env("KEYS_LOG", &log)
+            .env("KEYS_TILE", tile)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let mut keys: Vec<(String, u64)> = std::fs::read_to_string(&log)
+            .unwrap()
+            .lines()
+            .map(|l| l.rsplit_once(' ').map(|(at, key)| (at.to_string(), key.parse().unwrap())).unwrap())
+            .collect();
+        keys.sort();
+        keys
+    };
+    let (fours, sevens) = (keys("4"), keys("7"));
+    assert_eq!(fours.len(), 13 * 9 * 4);
+    assert_eq!(fours, sevens);
+    let mut distinct: Vec<u64> = fours.iter().map(|(_, k)| *k).collect();
+    distinct.sort();
+    distinct.dedup();
+    assert_eq!(distinct.len(), fours.len(), "every sample its own key");
+}

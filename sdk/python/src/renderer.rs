@@ -216,7 +216,6 @@ impl PyRenderingServer {
     }
 }
 
-/// Adds the renderer side to the module.
 /// A scene's digest ([`fbksd_exchange::scenes::scene_digest`]): what a
 /// Python renderer's reference note records, by the rule every renderer shares.
 #[pyfunction]
@@ -232,6 +231,7 @@ fn reference_key(generator: &str, samples_per_pixel: u64, scene_digest: &str) ->
     fbksd_exchange::scenes::reference_key(generator, samples_per_pixel, scene_digest)
 }
 
+/// Adds the renderer side to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderingServer>()?;
     m.add_function(wrap_pyfunction!(scene_digest, m)?)?;
