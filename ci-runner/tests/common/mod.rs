@@ -21,13 +21,13 @@ use std::time::{Duration, Instant};
 pub const CI_SCENES: &[&str] =
     &["experimental/sphere", "experimental/fireflies", "production-small/cornell-box", "experimental/spheres-sky"];
 
-/// What a runner on this machine needs to find fbksd-mitsuba, as
-/// `deploy/serve.sh` gives it: the program on PATH and the Python SDK of
-/// this build on PYTHONPATH.
+/// The renderers of this build as `deploy/serve.sh` gives them to its
+/// runner: this build's binaries and fbksd-mitsuba on PATH, and the Python
+/// SDK of this build on PYTHONPATH.
 pub fn renderer_env() -> Vec<(&'static str, String)> {
     let path = std::env::var("PATH").unwrap_or_default();
     vec![
-        ("PATH", format!("{}:{path}", workspace().join("renderers/mitsuba").display())),
+        ("PATH", format!("{}:{}:{path}", bin_dir().display(), workspace().join("renderers/mitsuba").display())),
         ("PYTHONPATH", fbksd_tests::python_path().display().to_string()),
     ]
 }
@@ -79,11 +79,7 @@ pub fn references(scenes: &[&str]) {
         // feature buffers are made.
         let dir = workspace().join("scenes").join(scene);
         let meta = fbksd_exchange::scenes::SceneMeta::load(&dir).unwrap();
-        let program = match meta.renderer.as_str() {
-            "mitsuba" => workspace().join("renderers/mitsuba/fbksd-mitsuba"),
-            renderer => bin_dir().join(format!("fbksd-{renderer}")),
-        };
-        let mut make = Command::new(program);
+        let mut make = Command::new(format!("fbksd-{}", meta.renderer));
         make.arg("reference").arg(&dir).envs(renderer_env());
         locked("fbksd-references.lock", &mut make);
     }

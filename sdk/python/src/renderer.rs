@@ -231,11 +231,20 @@ fn reference_key(generator: &str, samples_per_pixel: u64, scene_digest: &str) ->
     fbksd_exchange::scenes::reference_key(generator, samples_per_pixel, scene_digest)
 }
 
+/// The key of the reference a note (`reference.json`) describes
+/// ([`fbksd_exchange::scenes::note_reference_key`]): a reference is current
+/// when it equals the key the renderer would make now.
+#[pyfunction]
+fn note_reference_key(note: &[u8]) -> PyResult<String> {
+    fbksd_exchange::scenes::note_reference_key(note).map_err(pyo3::exceptions::PyValueError::new_err)
+}
+
 /// Adds the renderer side to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderingServer>()?;
     m.add_function(wrap_pyfunction!(scene_digest, m)?)?;
     m.add_function(wrap_pyfunction!(reference_key, m)?)?;
+    m.add_function(wrap_pyfunction!(note_reference_key, m)?)?;
     m.add("FEATURE_BUFFERS", fbksd_exchange::scenes::FEATURE_BUFFERS.to_vec())?;
     m.add("FEATURE_BUFFER_SPP", fbksd_exchange::scenes::FEATURE_BUFFER_SPP)?;
     Ok(())

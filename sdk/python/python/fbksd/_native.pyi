@@ -20,6 +20,7 @@ __all__ = [
     "RenderingServer",
     "scene_digest",
     "reference_key",
+    "note_reference_key",
     "FEATURE_BUFFERS",
     "FEATURE_BUFFER_SPP",
 ]
@@ -71,6 +72,7 @@ class RenderingServer:
 
 def scene_digest(scene_file: str | os.PathLike[str]) -> str: ...
 def reference_key(generator: str, samples_per_pixel: int, scene_digest: str) -> str: ...
+def note_reference_key(note: bytes) -> str: ...
 
 FEATURE_BUFFERS: list[str]
 FEATURE_BUFFER_SPP: int

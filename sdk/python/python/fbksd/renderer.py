@@ -35,16 +35,32 @@ manager's log.
 
 A renderer whose scenes join a service's pool also makes their
 references (``fbksd-<renderer> reference [--key] DIR...``, as
-``fbksd-mitsuba`` does): ``scene_digest`` and ``reference_key`` are the
-rules every renderer shares for the note beside a reference
-(``reference.json``: ``generator``, ``samples_per_pixel``,
-``scene_digest``), and ``FEATURE_BUFFERS`` at ``FEATURE_BUFFER_SPP`` the
+``fbksd-mitsuba`` does): ``scene_digest``, ``reference_key`` and
+``note_reference_key`` are the rules every renderer shares for the note
+beside a reference (``reference.json``: ``generator``,
+``samples_per_pixel``, ``scene_digest``; a reference is current when its
+note's key is the key it would have now), and ``FEATURE_BUFFERS`` at ``FEATURE_BUFFER_SPP`` the
 feature images made with it.
 """
 
-from fbksd._native import FEATURE_BUFFER_SPP, FEATURE_BUFFERS, RenderingServer, reference_key, scene_digest
+from fbksd._native import (
+    FEATURE_BUFFER_SPP,
+    FEATURE_BUFFERS,
+    RenderingServer,
+    note_reference_key,
+    reference_key,
+    scene_digest,
+)
 
 # The order of the columns of ``positions``.
 PARAMETERS = ("IMAGE_X", "IMAGE_Y", "LENS_U", "LENS_V", "TIME", "LIGHT_X", "LIGHT_Y")
 
-__all__ = ["RenderingServer", "PARAMETERS", "scene_digest", "reference_key", "FEATURE_BUFFERS", "FEATURE_BUFFER_SPP"]
+__all__ = [
+    "RenderingServer",
+    "PARAMETERS",
+    "scene_digest",
+    "reference_key",
+    "note_reference_key",
+    "FEATURE_BUFFERS",
+    "FEATURE_BUFFER_SPP",
+]
