@@ -340,47 +340,49 @@ impl Bvh {
         sys::IntersectContext { flags: 0, filter: std::ptr::null(), inst_id: [sys::INVALID_ID] }
     }
 
-    /// Answers closest-hit queries into `hits`, in order. The queries go to
-    /// Embree in packets of 16, which costs less per ray than one call each
-    /// (a third less on the Cornell box) even when the rays are incoherent.
-    pub fn intersect_batch(&self, queries: &[Query], hits: &mut Vec<Option<RayHit>>) {
-        hits.clear();
+    /// Answers closest-hit queries, calling `each` with every query's hit
+    /// in order. The queries go to Embree in packets of 16, which costs less
+    /// per ray than one call each (a third less on the Cornell box) even when
+    /// the rays are incoherent; each packet is filled straight from
+    /// `queries` and answered before the next is filled.
+    pub fn intersect_each(&self, queries: impl IntoIterator<Item = Query>, mut each: impl FnMut(Option<RayHit>)) {
+        let mut queries = queries.into_iter().peekable();
         let mut packet = sys::RayHit16::default();
-        for chunk in queries.chunks(LANES) {
-            let valid = packet.ray.load(chunk);
+        let first_instance = self.geometry_count;
+        while queries.peek().is_some() {
+            let (valid, n) = packet.ray.load(&mut queries);
             packet.hit.geom_id = [sys::INVALID_ID; LANES];
             packet.hit.inst_id = [[sys::INVALID_ID; LANES]];
             let mut context = Self::context();
             // SAFETY: the scene is committed; the packet and mask have Embree's layout and alignment.
             unsafe { sys::rtcIntersect16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, &mut packet) };
             let (ray, hit) = (&packet.ray, &packet.hit);
-            let first_instance = self.geometry_count;
-            hits.extend((0..chunk.len()).map(|k| {
+            for k in 0..n {
                 let instance = hit.inst_id[0][k];
-                (hit.geom_id[k] != sys::INVALID_ID).then(|| RayHit {
+                each((hit.geom_id[k] != sys::INVALID_ID).then(|| RayHit {
                     t: ray.tfar[k],
                     geometry: hit.geom_id[k],
                     primitive: hit.prim_id[k],
                     uv: [hit.u[k], hit.v[k]],
                     ng: [hit.ng_x[k], hit.ng_y[k], hit.ng_z[k]],
                     instance: (instance != sys::INVALID_ID).then(|| instance - first_instance),
-                })
-            }));
+                }));
+            }
         }
     }
 
-    /// Answers any-hit (shadow) queries into `occluded`, in order, in
-    /// packets as [`Bvh::intersect_batch`] does.
-    pub fn occluded_batch(&self, queries: &[Query], occluded: &mut Vec<bool>) {
-        occluded.clear();
+    /// Answers any-hit (shadow) queries, calling `each` with whether each is
+    /// blocked, in order, in packets as [`Bvh::intersect_each`] does.
+    pub fn occluded_each(&self, queries: impl IntoIterator<Item = Query>, mut each: impl FnMut(bool)) {
+        let mut queries = queries.into_iter().peekable();
         let mut packet = sys::Ray16::default();
-        for chunk in queries.chunks(LANES) {
-            let valid = packet.load(chunk);
+        while queries.peek().is_some() {
+            let (valid, n) = packet.load(&mut queries);
             let mut context = Self::context();
-            // SAFETY: as in intersect_batch.
+            // SAFETY: as in intersect_each.
             unsafe { sys::rtcOccluded16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, &mut packet) };
             // Embree marks an occluded ray by setting its tfar to −∞.
-            occluded.extend(packet.tfar[..chunk.len()].iter().map(|t| *t == f32::NEG_INFINITY));
+            packet.tfar[..n].iter().for_each(|t| each(*t == f32::NEG_INFINITY));
         }
     }
 }
@@ -409,10 +411,12 @@ const LANES: usize = 16;
 struct Valid([i32; LANES]);
 
 impl sys::Ray16 {
-    /// Loads up to 16 queries; the lanes past them are masked off.
-    fn load(&mut self, queries: &[Query]) -> Valid {
+    /// Loads up to 16 queries from `queries`; the lanes past them are masked
+    /// off. Returns the mask and how many were loaded.
+    fn load(&mut self, queries: &mut impl Iterator<Item = Query>) -> (Valid, usize) {
         let mut valid = Valid([0; LANES]);
-        for (k, q) in queries.iter().enumerate() {
+        let mut n = 0;
+        for (k, q) in queries.take(LANES).enumerate() {
             [self.org_x[k], self.org_y[k], self.org_z[k]] = q.org;
             [self.dir_x[k], self.dir_y[k], self.dir_z[k]] = q.dir;
             self.tnear[k] = q.tnear;
@@ -420,8 +424,9 @@ impl sys::Ray16 {
             self.time[k] = q.time;
             self.mask[k] = u32::MAX;
             valid.0[k] = -1;
+            n = k + 1;
         }
-        valid
+        (valid, n)
     }
 }
 
@@ -457,11 +462,11 @@ mod tests {
         let query =
             |x: f32, tfar: f32, time: f32| Query { org: [x, 0.2, 0.0], dir: [0.0, 0.0, 1.0], tnear: 0.0, tfar, time };
         let mut hits = Vec::new();
-        bvh.intersect_batch(&[query(0.2, f32::INFINITY, 0.0), query(0.2, f32::INFINITY, 1.0)], &mut hits);
+        bvh.intersect_each([query(0.2, f32::INFINITY, 0.0), query(0.2, f32::INFINITY, 1.0)], |h| hits.push(h));
         assert!(hits[0].is_some_and(|h| (h.t - 5.0).abs() < 1e-5));
         assert!(hits[1].is_none());
         let mut occluded = Vec::new();
-        bvh.occluded_batch(&[query(10.2, 10.0, 1.0), query(10.2, 4.0, 1.0)], &mut occluded);
+        bvh.occluded_each([query(10.2, 10.0, 1.0), query(10.2, 4.0, 1.0)], |o| occluded.push(o));
         assert_eq!(occluded, [true, false]);
     }
 
@@ -482,7 +487,7 @@ mod tests {
             })
             .collect();
         let mut hits = Vec::new();
-        bvh.intersect_batch(&queries, &mut hits);
+        bvh.intersect_each(queries, |h| hits.push(h));
         assert_eq!(hits.len(), 37);
         for (i, hit) in hits.iter().enumerate() {
             match hit {

@@ -382,7 +382,6 @@ pub struct Batch {
     /// The path of each segment.
     owners: Vec<u32>,
     occluded: Vec<bool>,
-    queries: crate::scene::QueryBuffers,
 }
 
 impl Batch {
@@ -400,7 +399,7 @@ impl Batch {
         while !self.live.is_empty() {
             self.rays.clear();
             self.rays.extend(self.live.iter().map(|&i| self.paths[i as usize].ray));
-            scene.intersect_all(&self.rays, &mut self.queries, &mut self.hits);
+            scene.intersect_all(&self.rays, &mut self.hits);
             self.segments.clear();
             self.owners.clear();
             for (&i, hit) in self.live.iter().zip(self.hits.drain(..)) {
@@ -416,7 +415,7 @@ impl Batch {
                     None => path.shadow_answered(true),
                 }
             }
-            scene.occluded_all(&self.segments, &mut self.queries, &mut self.occluded);
+            scene.occluded_all(&self.segments, &mut self.occluded);
             for (&i, &occluded) in self.owners.iter().zip(&self.occluded) {
                 self.paths[i as usize].shadow_answered(occluded);
             }

@@ -34,14 +34,6 @@ fn bound(shapes: &[Shape]) -> f32 {
     extent
 }
 
-/// Embree's query records for [`Scene::intersect_all`] and
-/// [`Scene::occluded_all`], kept between batches.
-#[derive(Debug, Default)]
-pub struct QueryBuffers {
-    queries: Vec<Query>,
-    hits: Vec<Option<crate::embree::RayHit>>,
-}
-
 /// Everything the integrator needs.
 pub struct Scene {
     /// A name for messages (the file stem).
@@ -249,52 +241,52 @@ impl Scene {
     }
 
     /// The closest surface along each ray (unbounded), in one batch to Embree.
-    pub fn intersect_all(&self, rays: &[Ray], buffers: &mut QueryBuffers, hits: &mut Vec<Option<SurfaceHit>>) {
-        let queries = &mut buffers.queries;
-        queries.clear();
-        queries.extend(rays.iter().map(|ray| Query {
+    pub fn intersect_all(&self, rays: &[Ray], hits: &mut Vec<Option<SurfaceHit>>) {
+        hits.clear();
+        let query = |ray: &Ray| Query {
             org: ray.origin.to_array(),
             dir: ray.dir.to_array(),
             tnear: 0.0,
             tfar: f32::INFINITY,
             time: self.embree_time(ray.time),
-        }));
-        self.bvh.intersect_batch(queries, &mut buffers.hits);
-        hits.clear();
-        hits.extend(rays.iter().zip(queries.iter()).zip(&buffers.hits).map(|((ray, query), hit)| {
-            let hit = hit.as_ref()?;
-            Some(match hit.instance {
-                None => self.shapes[hit.geometry as usize].geometry.surface(
-                    hit,
-                    ray.origin,
-                    ray.dir,
-                    query.time,
-                    hit.geometry,
-                ),
-                Some(k) => {
-                    // Found in the object's own space: the ray is taken there, the hit brought back.
-                    let instance = &self.instances[k as usize];
-                    let shape = self.objects[instance.object as usize].start + hit.geometry;
-                    let (origin, dir) = (instance.to_object.point(ray.origin), instance.to_object.vector(ray.dir));
-                    let local = self.shapes[shape as usize].geometry.surface(hit, origin, dir, query.time, shape);
-                    SurfaceHit { instance: Some(k), ..instance.to_world(local) }
+        };
+        let mut rays_answered = rays.iter();
+        self.bvh.intersect_each(rays.iter().map(query), |hit| {
+            let ray = rays_answered.next().expect("one answer per ray");
+            hits.push(hit.map(|hit| {
+                let time = self.embree_time(ray.time);
+                match hit.instance {
+                    None => self.shapes[hit.geometry as usize].geometry.surface(
+                        &hit,
+                        ray.origin,
+                        ray.dir,
+                        time,
+                        hit.geometry,
+                    ),
+                    Some(k) => {
+                        // Found in the object's own space: the ray is taken there, the hit brought back.
+                        let instance = &self.instances[k as usize];
+                        let shape = self.objects[instance.object as usize].start + hit.geometry;
+                        let (origin, dir) = (instance.to_object.point(ray.origin), instance.to_object.vector(ray.dir));
+                        let local = self.shapes[shape as usize].geometry.surface(&hit, origin, dir, time, shape);
+                        SurfaceHit { instance: Some(k), ..instance.to_world(local) }
+                    }
                 }
-            })
-        }));
+            }));
+        });
     }
 
     /// Whether anything blocks each segment, in one batch to Embree.
-    pub fn occluded_all(&self, segments: &[Segment], buffers: &mut QueryBuffers, occluded: &mut Vec<bool>) {
-        let queries = &mut buffers.queries;
-        queries.clear();
-        queries.extend(segments.iter().map(|s| Query {
+    pub fn occluded_all(&self, segments: &[Segment], occluded: &mut Vec<bool>) {
+        occluded.clear();
+        let query = |s: &Segment| Query {
             org: s.ray.origin.to_array(),
             dir: s.ray.dir.to_array(),
             tnear: 0.0,
             tfar: s.t_max,
             time: self.embree_time(s.ray.time),
-        }));
-        self.bvh.occluded_batch(queries, occluded);
+        };
+        self.bvh.occluded_each(segments.iter().map(query), |o| occluded.push(o));
     }
 
     /// ∂p/∂u and ∂p/∂v at a hit (see [`shape::Geometry::tangents`]), in world space.
