@@ -25,3 +25,31 @@ echo "== Agreement of the two Cornell images (each 64 spp) =="
 for metric in rMSE PSNR; do
     echo "$metric: $(./target/release/fbksd iqa "$metric" "$out/mitsuba.exr" "$out/ours/cornell-box.exr")"
 done
+# Where the time goes, when perf (Debian's linux-perf) is installed: the
+# share each renderer spends inside Embree, and so its Embree time per
+# sample. Both call the same kind of Embree packet queries, so the part
+# left is shading and bookkeeping; the bound printed last is how fast ours
+# could be beside Mitsuba with that part free.
+if command -v perf > /dev/null; then
+    echo "== Time inside Embree (perf) =="
+    embree_share() {
+        perf report -i "$1" --no-children --sort dso --stdio 2> /dev/null \
+            | awk '/libembree/ { gsub("%", "", $1); s += $1 } END { print s + 0 }'
+    }
+    perf record -q -o "$out/ours.perf" ./target/release/fbksd-embree bench "$cornell" --spp 64 > "$out/ours-perf.txt" 2> /dev/null
+    perf record -q -o "$out/mitsuba.perf" python3 renderers/embree/bench/mitsuba_bench.py "$out/mitsuba-scene" 64 \
+        > "$out/mitsuba-perf.txt" 2> /dev/null
+    python3 - "$(nproc)" "$(all_cores "$out/ours.txt")" "$(all_cores "$out/mitsuba.txt")" \
+        "$(embree_share "$out/ours.perf")" "$(embree_share "$out/mitsuba.perf")" <<'PY'
+import sys
+cores, ours, mitsuba, share_ours, share_mitsuba = map(float, sys.argv[1:])
+# Nanoseconds of one core per sample, and the part of it inside Embree.
+ns_ours, ns_mitsuba = cores * 1e3 / ours, cores * 1e3 / mitsuba
+embree_ours, embree_mitsuba = ns_ours * share_ours / 100, ns_mitsuba * share_mitsuba / 100
+print(f"ours:    {ns_ours:.0f} ns per sample, {embree_ours:.0f} in Embree ({share_ours:.0f} %), {ns_ours - embree_ours:.0f} the rest")
+print(f"Mitsuba: {ns_mitsuba:.0f} ns per sample, {embree_mitsuba:.0f} in Embree ({share_mitsuba:.0f} %), {ns_mitsuba - embree_mitsuba:.0f} the rest")
+print(f"ours / Mitsuba with the rest of ours free: at most {ns_mitsuba / embree_ours:.2f}x")
+PY
+else
+    echo "(install linux-perf to see the time each renderer spends inside Embree)"
+fi
