@@ -213,4 +213,12 @@ fn references_follow_the_rule_every_renderer_shares() {
     // The scene's files changed: another key.
     std::fs::write(scene.join("scene.xml"), std::fs::read_to_string(scene.join("scene.xml")).unwrap() + "\n").unwrap();
     assert_ne!(reference(&["--key"]).split_whitespace().next().unwrap(), key);
+    // Metadata without its image size is refused as the built-in renderers
+    // refuse it: the file and the missing field named, no traceback.
+    let meta = std::fs::read_to_string(scene.join("fbksd-scene.json")).unwrap();
+    std::fs::write(scene.join("fbksd-scene.json"), meta.replace("\"width\": 256,", "")).unwrap();
+    let out = Command::new(mitsuba()).arg("reference").arg(&scene).env("PYTHONPATH", python_path()).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{text}");
+    assert!(text.contains("fbksd-scene.json: missing field `width`") && !text.contains("Traceback"), "{text}");
 }

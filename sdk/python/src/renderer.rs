@@ -239,12 +239,47 @@ fn note_reference_key(note: &[u8]) -> PyResult<String> {
     fbksd_exchange::scenes::note_reference_key(note).map_err(pyo3::exceptions::PyValueError::new_err)
 }
 
+/// A scene directory's metadata (or the `fbksd-scene.json` itself), read
+/// and checked as the Rust renderers read it ([`SceneMeta::load`]) and
+/// checked to be `renderer`'s ([`SceneMeta::expect_renderer`]), with the
+/// paths a reference command needs resolved against the directory. A bad
+/// file raises `ValueError` naming the file and what is wrong.
+#[pyfunction]
+fn scene_meta<'py>(py: Python<'py>, path: std::path::PathBuf, renderer: &str) -> PyResult<Bound<'py, PyDict>> {
+    use fbksd_exchange::scenes::{ReferenceMethod, SceneMeta, FEATURE_BUFFERS};
+    let bad = |message: String| pyo3::exceptions::PyValueError::new_err(message);
+    let meta = SceneMeta::load(&path).map_err(|e| bad(e.to_string()))?;
+    meta.expect_renderer(renderer).map_err(bad)?;
+    let reference = meta.reference_file();
+    let dict = PyDict::new(py);
+    dict.set_item("name", &meta.name)?;
+    dict.set_item("dir", &meta.dir)?;
+    dict.set_item("width", meta.width)?;
+    dict.set_item("height", meta.height)?;
+    dict.set_item("scene_file", meta.scene_file())?;
+    dict.set_item("reference_file", &reference)?;
+    dict.set_item("note_file", reference.with_extension("json"))?;
+    // None for a closed-form reference, which no renderer renders.
+    let spp = match meta.reference {
+        ReferenceMethod::Render { spp } => Some(spp),
+        ReferenceMethod::ClosedForm { .. } => None,
+    };
+    dict.set_item("reference_spp", spp)?;
+    let buffers = PyDict::new(py);
+    for name in FEATURE_BUFFERS {
+        buffers.set_item(name, meta.feature_buffer_file(name))?;
+    }
+    dict.set_item("feature_buffers", buffers)?;
+    Ok(dict)
+}
+
 /// Adds the renderer side to the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderingServer>()?;
     m.add_function(wrap_pyfunction!(scene_digest, m)?)?;
     m.add_function(wrap_pyfunction!(reference_key, m)?)?;
     m.add_function(wrap_pyfunction!(note_reference_key, m)?)?;
+    m.add_function(wrap_pyfunction!(scene_meta, m)?)?;
     m.add("FEATURE_BUFFERS", fbksd_exchange::scenes::FEATURE_BUFFERS.to_vec())?;
     m.add("FEATURE_BUFFER_SPP", fbksd_exchange::scenes::FEATURE_BUFFER_SPP)?;
     Ok(())

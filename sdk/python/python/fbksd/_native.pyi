@@ -21,6 +21,7 @@ __all__ = [
     "scene_digest",
     "reference_key",
     "note_reference_key",
+    "scene_meta",
     "FEATURE_BUFFERS",
     "FEATURE_BUFFER_SPP",
 ]
@@ -73,6 +74,7 @@ class RenderingServer:
 def scene_digest(scene_file: str | os.PathLike[str]) -> str: ...
 def reference_key(generator: str, samples_per_pixel: int, scene_digest: str) -> str: ...
 def note_reference_key(note: bytes) -> str: ...
+def scene_meta(path: str | os.PathLike[str], renderer: str) -> dict[str, Any]: ...
 
 FEATURE_BUFFERS: list[str]
 FEATURE_BUFFER_SPP: int

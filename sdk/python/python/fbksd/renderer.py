@@ -40,7 +40,8 @@ references (``fbksd-<renderer> reference [--key] DIR...``, as
 beside a reference (``reference.json``: ``generator``,
 ``samples_per_pixel``, ``scene_digest``; a reference is current when its
 note's key is the key it would have now), and ``FEATURE_BUFFERS`` at ``FEATURE_BUFFER_SPP`` the
-feature images made with it.
+feature images made with it. ``scene_meta`` reads and checks a scene's
+``fbksd-scene.json`` as the built-in renderers do.
 """
 
 from fbksd._native import (
@@ -50,6 +51,7 @@ from fbksd._native import (
     note_reference_key,
     reference_key,
     scene_digest,
+    scene_meta,
 )
 
 # The order of the columns of ``positions``.
@@ -61,6 +63,7 @@ __all__ = [
     "scene_digest",
     "reference_key",
     "note_reference_key",
+    "scene_meta",
     "FEATURE_BUFFERS",
     "FEATURE_BUFFER_SPP",
 ]
