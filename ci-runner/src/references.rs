@@ -42,7 +42,7 @@ pub struct SceneReference {
 impl SceneReference {
     /// Whether the reference beside the scene is the one of its key.
     fn is_current(&self) -> bool {
-        let note = self.meta.reference_file().with_extension("json");
+        let note = self.meta.reference_note_file();
         self.meta.reference_file().is_file()
             && std::fs::read(note)
                 .ok()
@@ -259,7 +259,7 @@ pub async fn make_and_upload(
         }
     }
     // The note last: the server takes the reference whole or not at all.
-    files.push((REFERENCE_NOTE.to_string(), scene.meta.reference_file().with_extension("json")));
+    files.push((REFERENCE_NOTE.to_string(), scene.meta.reference_note_file()));
     for (name, path) in files {
         let bytes = std::fs::read(&path).map_err(|e| Failure::infrastructure(format!("{}: {e}", path.display())))?;
         api.put_file(claim, &name, bytes).await?;
@@ -299,7 +299,7 @@ async fn install(
             write_whole(&scene.meta.feature_buffer_file(buffer), &bytes)?;
         }
     }
-    write_whole(&scene.meta.reference_file().with_extension("json"), &note)
+    write_whole(&scene.meta.reference_note_file(), &note)
 }
 
 fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {

@@ -65,7 +65,7 @@ impl std::fmt::Display for ReferenceNote {
 /// Builds (or keeps) a scene's reference; returns its note.
 pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
-    let note_file = out.with_extension("json");
+    let note_file = meta.reference_note_file();
     let (spp, digest) = recipe(meta, spp_override)?;
     if !force {
         if let Some(text) = fbksd_exchange::scenes::current_reference_note(meta, &generator(), spp, &digest)? {

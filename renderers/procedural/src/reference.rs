@@ -75,7 +75,7 @@ impl std::fmt::Display for ReferenceNote {
 /// returns its note.
 pub fn build(meta: &SceneMeta, force: bool, spp_override: Option<u64>) -> anyhow::Result<ReferenceNote> {
     let out = meta.reference_file();
-    let note_file = out.with_extension("json");
+    let note_file = meta.reference_note_file();
     let (samples_per_pixel, digest) = recipe(meta, spp_override)?;
     if !force {
         if let Some(text) =

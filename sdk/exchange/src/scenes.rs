@@ -132,8 +132,7 @@ pub fn current_reference_note(
     samples_per_pixel: u64,
     digest: &str,
 ) -> std::io::Result<Option<String>> {
-    let reference = meta.reference_file();
-    let note_file = reference.with_extension("json");
+    let (reference, note_file) = (meta.reference_file(), meta.reference_note_file());
     if !reference.is_file() || !note_file.is_file() {
         return Ok(None);
     }
@@ -215,6 +214,12 @@ impl SceneMeta {
     /// The reference image.
     pub fn reference_file(&self) -> PathBuf {
         self.dir.join(&self.ref_img)
+    }
+
+    /// The reference's note (`reference.json` beside `reference.exr`): what
+    /// made it, which [`current_reference_note`] and the runners read.
+    pub fn reference_note_file(&self) -> PathBuf {
+        self.reference_file().with_extension("json")
     }
 
     /// The feature buffer `name` (one of [`FEATURE_BUFFERS`]) made with the

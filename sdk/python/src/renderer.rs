@@ -250,15 +250,14 @@ fn scene_meta<'py>(py: Python<'py>, path: std::path::PathBuf, renderer: &str) ->
     let bad = |message: String| pyo3::exceptions::PyValueError::new_err(message);
     let meta = SceneMeta::load(&path).map_err(|e| bad(e.to_string()))?;
     meta.expect_renderer(renderer).map_err(bad)?;
-    let reference = meta.reference_file();
     let dict = PyDict::new(py);
     dict.set_item("name", &meta.name)?;
     dict.set_item("dir", &meta.dir)?;
     dict.set_item("width", meta.width)?;
     dict.set_item("height", meta.height)?;
     dict.set_item("scene_file", meta.scene_file())?;
-    dict.set_item("reference_file", &reference)?;
-    dict.set_item("note_file", reference.with_extension("json"))?;
+    dict.set_item("reference_file", meta.reference_file())?;
+    dict.set_item("note_file", meta.reference_note_file())?;
     // None for a closed-form reference, which no renderer renders.
     let spp = match meta.reference {
         ReferenceMethod::Render { spp } => Some(spp),

@@ -250,9 +250,8 @@ impl Scene {
             tfar: f32::INFINITY,
             time: self.embree_time(ray.time),
         };
-        let mut rays_answered = rays.iter();
-        self.bvh.intersect_each(rays.iter().map(query), |hit| {
-            let ray = rays_answered.next().expect("one answer per ray");
+        self.bvh.intersect_each(rays.iter().map(query), |i, hit| {
+            let ray = &rays[i];
             hits.push(hit.map(|hit| {
                 let time = self.embree_time(ray.time);
                 match hit.instance {
