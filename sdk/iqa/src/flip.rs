@@ -286,11 +286,21 @@ fn row_pass(rgb_row: &[f32], exposure: Exposure, k: &Kernels, padded: &mut [Vec<
     for (x, p) in rgb_row.chunks_exact(3).enumerate() {
         (py[pad + x], pcx[pad + x], pcz[pad + x]) = (p[0], p[1], p[2]);
     }
-    for x in pad..pad + w {
-        let rgb = [exposure.apply(py[x]), exposure.apply(pcx[x]), exposure.apply(pcz[x])];
-        let v = xyz_to_ycxcz(mat(&TO_XYZ, rgb));
-        (py[x], pcx[x], pcz[x]) = (v[0], v[1], v[2]);
-        pyn[x] = v[0] * (1.0 / 116.0) + 16.0 / 116.0;
+    // One loop per exposure kind: with the kind tested inside, the
+    // vectorised loop computed the tone map's division for LDR pixels too.
+    #[inline(always)]
+    fn colour(planes: [&mut [f32]; 4], apply: impl Fn(f32) -> f32) {
+        let [py, pcx, pcz, pyn] = planes;
+        for (((y, cx), cz), yn) in py.iter_mut().zip(pcx.iter_mut()).zip(pcz.iter_mut()).zip(pyn.iter_mut()) {
+            let v = xyz_to_ycxcz(mat(&TO_XYZ, [apply(*y), apply(*cx), apply(*cz)]));
+            (*y, *cx, *cz) = (v[0], v[1], v[2]);
+            *yn = v[0] * (1.0 / 116.0) + 16.0 / 116.0;
+        }
+    }
+    let planes = [&mut py[pad..pad + w], &mut pcx[pad..pad + w], &mut pcz[pad..pad + w], &mut pyn[pad..pad + w]];
+    match exposure {
+        Exposure::Ldr => colour(planes, |v| Exposure::Ldr.apply(v)),
+        Exposure::Hdr(m) => colour(planes, |v| Exposure::Hdr(m).apply(v)),
     }
     // Clamp-to-edge borders.
     for plane in [&mut *py, &mut *pcx, &mut *pcz, &mut *pyn] {
