@@ -341,29 +341,48 @@ impl Path {
         let mut out = self.out;
         out.color = self.l;
         out.diffuse = self.diffuse;
-        // A last line of defence: nothing non-finite leaves the renderer. Any
-        // replacement is counted and reported, so it is a visible bug, not a fix.
-        let mut repaired = false;
-        let mut clean = |v: &mut Vec3| {
+        out.repair_non_finite();
+        out
+    }
+}
+
+impl SampleValues {
+    /// A last line of defence: nothing non-finite leaves the renderer. Any
+    /// replacement is counted and reported, so it is a visible bug, not a fix.
+    #[inline]
+    fn repair_non_finite(&mut self) {
+        let depth = self.depth;
+        let [h0, h1] = &mut self.hits;
+        let ns = &mut self.non_specular;
+        let vectors = [
+            &mut self.color,
+            &mut self.direct,
+            &mut self.diffuse,
+            &mut h0.world,
+            &mut h0.normal,
+            &mut h0.albedo,
+            &mut h1.world,
+            &mut h1.normal,
+            &mut h1.albedo,
+            &mut ns.world,
+            &mut ns.normal,
+            &mut ns.albedo,
+        ];
+        // One sum of v · 0 instead of a test per value: it is ±0 exactly
+        // when no value is infinite or NaN.
+        if vectors.iter().fold(depth * 0.0, |sum, v| sum + v.dot(Vec3::ZERO)) == 0.0 {
+            return;
+        }
+        for v in vectors {
             if !v.is_finite() {
-                repaired = true;
+                self.repaired = true;
                 *v = Vec3::ZERO;
             }
-        };
-        clean(&mut out.color);
-        clean(&mut out.direct);
-        clean(&mut out.diffuse);
-        for h in out.hits.iter_mut().chain(std::iter::once(&mut out.non_specular)) {
-            clean(&mut h.world);
-            clean(&mut h.normal);
-            clean(&mut h.albedo);
         }
-        if !out.depth.is_finite() {
-            repaired = true;
-            out.depth = 0.0;
+        if !depth.is_finite() {
+            self.repaired = true;
+            self.depth = 0.0;
         }
-        out.repaired = repaired;
-        out
     }
 }
 
@@ -495,4 +514,33 @@ fn sample_light(
         wi_local,
     };
     Some((Segment { ray, t_max }, contribution))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn non_finite_values_are_zeroed_and_counted_finite_ones_kept() {
+        let v = |x: f32| Vec3 { x, y: 0.5, z: -2.0 };
+        let mut clean = SampleValues { color: v(1.0), depth: 3.0, ..SampleValues::default() };
+        clean.hits[1].albedo = v(-0.0);
+        let before = clean;
+        clean.repair_non_finite();
+        assert!(!clean.repaired);
+        assert_eq!((clean.color, clean.hits[1].albedo, clean.depth), (before.color, before.hits[1].albedo, 3.0));
+
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut values = SampleValues { color: v(1.0), depth: 3.0, ..SampleValues::default() };
+            values.non_specular.normal = v(bad);
+            values.repair_non_finite();
+            assert!(values.repaired, "{bad}");
+            assert_eq!(values.non_specular.normal, Vec3::ZERO);
+            assert_eq!((values.color, values.depth), (v(1.0), 3.0), "finite values kept");
+
+            let mut values = SampleValues { depth: bad, ..SampleValues::default() };
+            values.repair_non_finite();
+            assert!(values.repaired && values.depth == 0.0, "depth {bad}");
+        }
+    }
 }
