@@ -124,8 +124,9 @@ pub fn note_reference_key(note: &[u8]) -> Result<String, String> {
 
 /// The one rule for cached references, shared by every renderer: the
 /// reference beside a scene is kept when it and its note (`reference.json`)
-/// exist and the note names the same `generator`, `samples_per_pixel` and
-/// `scene_digest` ([`scene_digest`]). Returns the note's text when it is kept.
+/// exist and the note's key ([`note_reference_key`]) is the one of this
+/// `generator`, `samples_per_pixel` and `scene_digest` ([`scene_digest`]),
+/// as a runner checks it. Returns the note's text when it is kept.
 pub fn current_reference_note(
     meta: &SceneMeta,
     generator: &str,
@@ -137,10 +138,8 @@ pub fn current_reference_note(
         return Ok(None);
     }
     let text = std::fs::read_to_string(&note_file)?;
-    let note: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
-    let current = note["generator"] == generator
-        && note["samples_per_pixel"] == samples_per_pixel
-        && note["scene_digest"] == digest;
+    let current =
+        note_reference_key(text.as_bytes()).is_ok_and(|key| key == reference_key(generator, samples_per_pixel, digest));
     Ok(current.then_some(text))
 }
 
