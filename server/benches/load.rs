@@ -52,6 +52,8 @@ struct Figures {
     errors: usize,
     latencies: Vec<Duration>,
     elapsed: Duration,
+    /// Body bytes received, over all requests.
+    bytes: usize,
 }
 
 /// `connections` tasks request `url` for `seconds`, each on its own connection.
@@ -63,7 +65,7 @@ async fn hammer(url: &str, cookie: Option<&str>, connections: usize, seconds: u6
             let (url, cookie) = (url.to_string(), cookie.map(str::to_string));
             tokio::spawn(async move {
                 let client = reqwest::Client::builder().pool_max_idle_per_host(1).build().unwrap();
-                let (mut latencies, mut errors) = (Vec::new(), 0usize);
+                let (mut latencies, mut errors, mut bytes) = (Vec::new(), 0usize, 0usize);
                 while Instant::now() < deadline {
                     let began = Instant::now();
                     let mut request = client.get(&url);
@@ -72,20 +74,21 @@ async fn hammer(url: &str, cookie: Option<&str>, connections: usize, seconds: u6
                     }
                     match request.send().await {
                         Ok(r) if r.status().is_success() => {
-                            let _ = r.bytes().await;
+                            bytes += r.bytes().await.map_or(0, |b| b.len());
                             latencies.push(began.elapsed());
                         }
                         _ => errors += 1,
                     }
                 }
-                (latencies, errors)
+                (latencies, errors, bytes)
             })
         })
         .collect();
-    let mut figures = Figures { requests: 0, errors: 0, latencies: Vec::new(), elapsed: Duration::ZERO };
+    let mut figures = Figures { requests: 0, errors: 0, latencies: Vec::new(), elapsed: Duration::ZERO, bytes: 0 };
     for task in tasks {
-        let (latencies, errors) = task.await.unwrap();
+        let (latencies, errors, bytes) = task.await.unwrap();
         figures.errors += errors;
+        figures.bytes += bytes;
         figures.latencies.extend(latencies);
     }
     figures.elapsed = start.elapsed();
@@ -156,8 +159,8 @@ async fn main() {
         techniques - 1
     );
     println!(
-        "{:<34} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7}",
-        "page", "requests", "req/s", "p50 ms", "p99 ms", "max ms", "errors"
+        "{:<34} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7} {:>9}",
+        "page", "requests", "req/s", "p50 ms", "p99 ms", "max ms", "errors", "body KB"
     );
     let pages = [
         ("GET /results/ (leaderboard)", format!("{}/results/", server.url), None),
@@ -227,12 +230,13 @@ async fn main() {
 
 fn print_figures(label: &str, f: &Figures) {
     println!(
-        "{label:<34} {:>9} {:>9.0} {:>9.1} {:>9.1} {:>9.1} {:>7}",
+        "{label:<34} {:>9} {:>9.0} {:>9.1} {:>9.1} {:>9.1} {:>7} {:>9.1}",
         f.requests,
         f.requests as f64 / f.elapsed.as_secs_f64(),
         percentile(&f.latencies, 0.5),
         percentile(&f.latencies, 0.99),
         percentile(&f.latencies, 1.0),
-        f.errors
+        f.errors,
+        f.bytes as f64 / f.requests.max(1) as f64 / 1024.0
     );
 }

@@ -5,8 +5,9 @@
 //!
 //! The published part of a season is kept in memory ([`BoardCache`]) and
 //! reloaded when the database's board version changes, so a page view
-//! costs one small query however many techniques are published, and every
-//! server instance sees every change.
+//! costs at most one small query however many techniques are published
+//! (shared with the views waiting at the same time), and every server
+//! instance sees every change.
 //!
 //! A board never mixes references: on each scene it ranks the runs scored
 //! against the reference of the newest set that ran there
@@ -161,7 +162,10 @@ pub const MAX_CACHED_SEASONS: usize = 8;
 /// Seasons' published data kept in memory, by season; the least recently
 /// read season leaves first.
 #[derive(Clone, Default)]
-pub struct BoardCache(Arc<Mutex<CachedSeasons>>);
+pub struct BoardCache {
+    seasons: Arc<Mutex<CachedSeasons>>,
+    version: crate::results::SharedBoardVersion,
+}
 
 #[derive(Default)]
 struct CachedSeasons {
@@ -192,10 +196,16 @@ impl CachedSeasons {
 }
 
 impl BoardCache {
+    /// The board version, from a read that began after this call (shared
+    /// with the calls waiting at the same time).
+    pub async fn version(&self, pool: &AnyPool) -> Result<i64, sqlx::Error> {
+        self.version.read(pool).await
+    }
+
     async fn season(&self, pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
         use crate::results::Selection;
-        let version = crate::results::board_version(pool).await?;
-        if let Some(data) = self.0.lock().ok().and_then(|mut m| m.get(season)) {
+        let version = self.version(pool).await?;
+        if let Some(data) = self.seasons.lock().ok().and_then(|mut m| m.get(season)) {
             if data.version == version {
                 return Ok(data);
             }
@@ -211,7 +221,7 @@ impl BoardCache {
             boards: Mutex::new(HashMap::new()),
             pages: Mutex::new(HashMap::new()),
         });
-        if let Ok(mut map) = self.0.lock() {
+        if let Ok(mut map) = self.seasons.lock() {
             map.keep(season, data.clone());
         }
         Ok(data)

@@ -14,6 +14,8 @@ use fbksd_exchange::MetricInfo;
 use serde::Serialize;
 use sqlx::{AnyPool, Row};
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+use std::time::Instant;
 
 pub use fbksd_exchange::runner_api::{SceneProvenance, Upload};
 
@@ -432,6 +434,36 @@ pub async fn board_version(pool: &AnyPool) -> Result<i64, sqlx::Error> {
     sqlx::query("SELECT version FROM board_version WHERE id = 1").fetch_one(pool).await?.try_get("version")
 }
 
+/// Reads of the board version shared by the callers asking at the same
+/// time. Each caller gets the version from a read that began after it
+/// asked, so it sees every change committed before then, on any instance,
+/// as a read of its own would; but one query answers every caller that was
+/// waiting when it began. Under load the board pages cost a query per
+/// batch of readers instead of one each (SQLite has one connection), which
+/// took the load benchmark's leaderboard page from 2 300–3 200 to
+/// 4 000–4 800 req/s on two cores.
+#[derive(Clone, Default)]
+pub struct SharedBoardVersion(Arc<tokio::sync::Mutex<Option<(Instant, i64)>>>);
+
+impl SharedBoardVersion {
+    /// The board version as of a read that began after this call.
+    pub async fn read(&self, pool: &AnyPool) -> Result<i64, sqlx::Error> {
+        let asked = Instant::now();
+        // Held across the query: callers arriving meanwhile wait for it to
+        // end, then the first of them starts the next read for the rest.
+        let mut last = self.0.lock().await;
+        if let Some((began, version)) = *last {
+            if began > asked {
+                return Ok(version);
+            }
+        }
+        let began = Instant::now();
+        let version = board_version(pool).await?;
+        *last = Some((began, version));
+        Ok(version)
+    }
+}
+
 /// One published set per project and season. By project, not by name: a
 /// deleted project's published sets stay on the board, and whoever takes
 /// its name again publishes beside them, never over them. A set whose
@@ -590,4 +622,36 @@ pub async fn reference_hash(pool: &AnyPool, set_id: &str, scene: &str) -> Result
         .fetch_optional(pool)
         .await?;
     row.map(|r| r.try_get("reference_hash")).transpose()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_shared_version_read_sees_every_change_committed_before_it_was_asked() {
+        let dir = tempfile::tempdir().unwrap();
+        let pool = crate::db::connect(&format!("sqlite://{}?mode=rwc", dir.path().join("db").display())).await.unwrap();
+        let shared = SharedBoardVersion::default();
+        // Other readers keep a read in flight nearly all the time, so a
+        // reader that took one already begun would see a stale version.
+        let readers: Vec<_> = (0..8)
+            .map(|_| {
+                let (shared, pool) = (shared.clone(), pool.clone());
+                tokio::spawn(async move {
+                    for _ in 0..300 {
+                        shared.read(&pool).await.unwrap();
+                    }
+                })
+            })
+            .collect();
+        for _ in 0..100 {
+            boards_changed(&pool).await.unwrap();
+            let committed = board_version(&pool).await.unwrap();
+            assert!(shared.read(&pool).await.unwrap() >= committed, "a read older than version {committed}");
+        }
+        for reader in readers {
+            reader.await.unwrap();
+        }
+    }
 }

@@ -6,10 +6,12 @@
 //! the board version does (a publish, a hide, a new season: every server
 //! instance sees it in the database). So each is rendered once per version
 //! and kept, with an ETag naming the version and the query; a reader who
-//! already has it gets 304. Each request still reads the version, so
-//! another instance's publish shows at once.
+//! already has it gets 304. Each request is still answered from a version
+//! read that began after it arrived (one read shared by the requests
+//! waiting together, [`crate::results::SharedBoardVersion`]), so another
+//! instance's publish shows at once.
 
-use crate::leaderboard::BoardQuery;
+use crate::leaderboard::{BoardCache, BoardQuery};
 use crate::routes::ApiError;
 use axum::body::Bytes;
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
@@ -59,6 +61,7 @@ impl PublicBoards {
     /// ETag), or `render`'s, kept for the next reader.
     pub async fn respond(
         &self,
+        boards: &BoardCache,
         pool: &AnyPool,
         rendering: Rendering,
         query: &BoardQuery,
@@ -66,7 +69,7 @@ impl PublicBoards {
         render: impl std::future::Future<Output = Result<String, ApiError>>,
     ) -> Result<Response, ApiError> {
         let key = (rendering, query.season, query.sort.clone(), query.tag.clone());
-        let version = crate::results::board_version(pool).await?;
+        let version = boards.version(pool).await?;
         let kept = self.0.lock().ok().and_then(|k| k.get(&key).filter(|k| k.version == version).cloned());
         let kept = match kept {
             Some(kept) => kept,

@@ -36,7 +36,10 @@ pub async fn board(
         let board = leaderboard::build(&state.pool, &state.boards, &query, None).await?;
         serde_json::to_string(&board).map_err(ApiError::internal)
     };
-    state.public_boards.respond(&state.pool, crate::routes::Rendering::Json, &query, &headers, render).await
+    state
+        .public_boards
+        .respond(&state.boards, &state.pool, crate::routes::Rendering::Json, &query, &headers, render)
+        .await
 }
 
 /// `POST /api/v1/results/{id}/publish`: the owner publishes.

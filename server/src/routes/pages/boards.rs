@@ -218,7 +218,10 @@ pub async fn leaderboard_page(
         let page = board_template(&state, nav, query.clone(), None, false).await.map_err(|e| e.0)?;
         page.render().map_err(ApiError::internal)
     };
-    Ok(state.public_boards.respond(&state.pool, crate::routes::Rendering::Html, &query, &headers, render).await?)
+    Ok(state
+        .public_boards
+        .respond(&state.boards, &state.pool, crate::routes::Rendering::Html, &query, &headers, render)
+        .await?)
 }
 
 /// `GET /results/{id}`: a result set beside every published technique.
