@@ -429,8 +429,9 @@ pub async fn boards_changed<'e>(executor: impl sqlx::Executor<'e, Database = sql
     Ok(())
 }
 
-/// The current board version.
-pub async fn board_version(pool: &AnyPool) -> Result<i64, sqlx::Error> {
+/// The current board version. Read through [`SharedBoardVersion`], the one
+/// reader, so that every page view shares it.
+async fn board_version(pool: &AnyPool) -> Result<i64, sqlx::Error> {
     sqlx::query("SELECT version FROM board_version WHERE id = 1").fetch_one(pool).await?.try_get("version")
 }
 
