@@ -303,23 +303,43 @@ impl Sampler {
     /// rounds that waits on itself; a stage's samples are independent, so
     /// the processor overlaps them.
     pub fn pixel_samples(&self, pixel: &PixelSeed, strata: &Strata, s0: u64, needed: u8, out: &mut [[f64; 7]]) {
+        /// [`Sampler::pixel_samples_in`] compiled for `$features`.
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            /// # Safety
-            /// The CPU must support AVX2.
-            #[target_feature(enable = "avx2")]
-            unsafe fn avx2(
-                sampler: &Sampler,
-                pixel: &PixelSeed,
-                strata: &Strata,
-                s0: u64,
-                needed: u8,
-                out: &mut [[f64; 7]],
-            ) {
-                sampler.pixel_samples_in(pixel, strata, s0, needed, out)
+        macro_rules! compiled_for {
+            ($name:ident, $features:literal) => {
+                /// # Safety
+                /// The CPU must support the features.
+                #[target_feature(enable = $features)]
+                unsafe fn $name(
+                    s: &Sampler,
+                    p: &PixelSeed,
+                    strata: &Strata,
+                    s0: u64,
+                    needed: u8,
+                    out: &mut [[f64; 7]],
+                ) {
+                    s.pixel_samples_in(p, strata, s0, needed, out)
+                }
+            };
+        }
+        // The values are the same in every build: integer lanes, and IEEE
+        // doubles with no fused multiply-add (Rust never fuses on its own).
+        // AVX-512 first: its DQ extension multiplies 64-bit lanes and turns
+        // them into doubles in one instruction each, which AVX2 emulates or
+        // does lane by lane (the hashes are 64-bit multiplies).
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::is_x86_feature_detected as has;
+            compiled_for!(avx512, "avx512f,avx512dq,avx512vl");
+            compiled_for!(avx2, "avx2");
+            if has!("avx512f") && has!("avx512dq") && has!("avx512vl") {
+                // SAFETY: the features were just detected.
+                return unsafe { avx512(self, pixel, strata, s0, needed, out) };
             }
-            // SAFETY: the feature was just detected; the values are the same (integer lanes).
-            return unsafe { avx2(self, pixel, strata, s0, needed, out) };
+            if has!("avx2") {
+                // SAFETY: the feature was just detected.
+                return unsafe { avx2(self, pixel, strata, s0, needed, out) };
+            }
         }
         self.pixel_samples_in(pixel, strata, s0, needed, out)
     }
