@@ -204,6 +204,8 @@ on_both_databases!(a_newcomer_is_told_how_to_submit_and_what_is_being_prepared, 
     assert!(page.contains("How to submit a technique") && page.contains("href=\"/register\""), "{page}");
     assert!(page.contains("git push -o FBKSD_RUN") && page.contains("sends no options"), "{page}");
     assert!(page.contains("No runner is connected yet"), "{page}");
+    // No result has named a metric yet: no empty "Sort by" choice, no "Ranking by" nothing.
+    assert!(!page.contains("Sort by") && page.contains("<h2>Ranking</h2>"), "{page}");
 
     // A runner preparing its references says so there, and the page refreshes itself.
     let runner = FakeRunner::register(&server, "r1").await;
