@@ -143,6 +143,27 @@ on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its
     assert!(before.contains("bob-filter") && !before.contains("ada-filter"));
     let again = anonymous.get(format!("{}/results/", server.url)).header("if-none-match", &etag).send().await.unwrap();
     assert_eq!((again.status().as_u16(), again.text().await.unwrap().len()), (304, 0));
+    // A browser asks for gzip: the same page, compressed once per board version, under its own ETag.
+    let gzip = |etag: Option<&str>| {
+        let request = anonymous.get(format!("{}/results/", server.url)).header("accept-encoding", "gzip, deflate, br");
+        match etag {
+            Some(etag) => request.header("if-none-match", etag),
+            None => request,
+        }
+        .send()
+    };
+    let zipped = gzip(None).await.unwrap();
+    assert_eq!(
+        (zipped.status().as_u16(), zipped.headers().get("content-encoding")),
+        (200, Some(&"gzip".parse().unwrap()))
+    );
+    let zipped_etag = zipped.headers()["etag"].to_str().unwrap().to_string();
+    assert_ne!(zipped_etag, etag, "another representation, another ETag");
+    let mut unzipped = String::new();
+    std::io::Read::read_to_string(&mut flate2::read::GzDecoder::new(&zipped.bytes().await.unwrap()[..]), &mut unzipped)
+        .unwrap();
+    assert_eq!(unzipped, before, "the gzip copy is the page");
+    assert_eq!(gzip(Some(&zipped_etag)).await.unwrap().status(), 304);
     let api = anonymous.get(format!("{}/api/v1/leaderboard", server.url)).send().await.unwrap();
     let api_etag = api.headers()["etag"].to_str().unwrap().to_string();
     assert_ne!(api_etag, etag, "the JSON and the page are told apart");
