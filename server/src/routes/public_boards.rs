@@ -11,9 +11,10 @@
 //! waiting together, [`crate::results::SharedBoardVersion`]), so another
 //! instance's publish shows at once.
 //!
-//! A browser asks for gzip: each kept rendering keeps its gzip copy too,
-//! compressed once per version instead of once per request (the page is
-//! 180 KB with 20 techniques).
+//! A browser asks for gzip: each kept rendering keeps a gzip copy too, made
+//! by its first reader who asks for gzip, instead of once per request (the
+//! page is 180 KB with 20 techniques). Readers who render the same version
+//! at once all share the first rendering kept, and so its one gzip copy.
 
 use crate::leaderboard::{BoardCache, BoardQuery};
 use crate::routes::ApiError;
@@ -22,7 +23,7 @@ use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use sqlx::AnyPool;
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// What a kept board is rendered as.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -51,7 +52,14 @@ struct Kept {
     body: Bytes,
     /// The same body gzip-encoded, under its own ETag (another representation).
     gzip_etag: HeaderValue,
-    gzip: Bytes,
+    /// Made when first asked for; None if it could not be (the plain body is served).
+    gzip: OnceLock<Option<Bytes>>,
+}
+
+impl Kept {
+    fn gzip(&self) -> Option<&Bytes> {
+        self.gzip.get_or_init(|| gzip(&self.body).ok().map(Bytes::from)).as_ref()
+    }
 }
 
 /// Renderings kept at most: a query naming no existing metric or tag still
@@ -82,8 +90,11 @@ impl PublicBoards {
             Some(kept) => kept,
             None => self.keep(key, version, render.await?)?,
         };
-        let gzip = accepts_gzip(request);
-        let (etag, body) = if gzip { (&kept.gzip_etag, &kept.gzip) } else { (&kept.etag, &kept.body) };
+        let gzip = if accepts_gzip(request) { kept.gzip() } else { None };
+        let (etag, body) = match gzip {
+            Some(gzip) => (&kept.gzip_etag, gzip),
+            None => (&kept.etag, &kept.body),
+        };
         let fresh = request.get(header::IF_NONE_MATCH) == Some(etag);
         let mut response = if fresh {
             StatusCode::NOT_MODIFIED.into_response()
@@ -91,7 +102,7 @@ impl PublicBoards {
             ([(header::CONTENT_TYPE, rendering.content_type())], body.clone()).into_response()
         };
         let headers = response.headers_mut();
-        if gzip && !fresh {
+        if gzip.is_some() && !fresh {
             // Already encoded: the compression layer leaves it as it is.
             headers.insert(header::CONTENT_ENCODING, HeaderValue::from_static("gzip"));
         }
@@ -112,15 +123,18 @@ impl PublicBoards {
             version,
             etag: tag("")?,
             gzip_etag: tag("-gzip")?,
-            gzip: gzip(body.as_bytes()).map_err(ApiError::internal)?.into(),
+            gzip: OnceLock::new(),
             body: body.into(),
         });
-        if let Ok(mut all) = self.0.lock() {
-            // Renderings of an older version go first.
-            all.retain(|_, k| k.version >= version);
-            if all.len() < MAX_KEPT || all.contains_key(&key) {
-                all.insert(key, kept.clone());
-            }
+        let Ok(mut all) = self.0.lock() else { return Ok(kept) };
+        // Another reader kept this version first: share it (and its gzip copy).
+        if let Some(first) = all.get(&key).filter(|k| k.version == version) {
+            return Ok(first.clone());
+        }
+        // Renderings of an older version go first.
+        all.retain(|_, k| k.version >= version);
+        if all.len() < MAX_KEPT || all.contains_key(&key) {
+            all.insert(key, kept.clone());
         }
         Ok(kept)
     }
@@ -141,7 +155,7 @@ fn accepts_gzip(request: &HeaderMap) -> bool {
     )
 }
 
-/// `body` gzip-encoded at the best ratio: done once per board version.
+/// `body` gzip-encoded at the best ratio: done once per kept rendering.
 fn gzip(body: &[u8]) -> std::io::Result<Vec<u8>> {
     use std::io::Write;
     let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
