@@ -139,7 +139,6 @@ type BoardKey = (Option<String>, Option<String>);
 
 /// The published sets of one season with their runs and scene tags.
 struct SeasonData {
-    version: i64,
     sets: Vec<ResultSet>,
     runs: Vec<StoredRun>,
     tags: BTreeMap<String, BTreeSet<String>>,
@@ -167,31 +166,45 @@ pub struct BoardCache {
     version: crate::results::SharedBoardVersion,
 }
 
+/// One season's data at one board version: loaded by its first reader,
+/// awaited by the readers who miss it at the same time (a publish makes
+/// them all miss at once).
+struct SeasonSlot {
+    version: i64,
+    data: tokio::sync::OnceCell<Arc<SeasonData>>,
+}
+
 #[derive(Default)]
 struct CachedSeasons {
-    /// Season → (data, when it was last read, by `clock`).
-    seasons: HashMap<i64, (Arc<SeasonData>, u64)>,
+    /// Season → (its slot, when it was last read, by `clock`).
+    seasons: HashMap<i64, (Arc<SeasonSlot>, u64)>,
     clock: u64,
 }
 
 impl CachedSeasons {
-    fn get(&mut self, season: i64) -> Option<Arc<SeasonData>> {
+    /// The slot of `season` at `version`, kept for later readers unless a
+    /// newer version is kept already (this reader's version read began
+    /// before its publish).
+    fn slot(&mut self, season: i64, version: i64) -> Arc<SeasonSlot> {
         self.clock += 1;
         let clock = self.clock;
-        self.seasons.get_mut(&season).map(|(data, used)| {
-            *used = clock;
-            data.clone()
-        })
-    }
-
-    fn keep(&mut self, season: i64, data: Arc<SeasonData>) {
-        self.clock += 1;
+        let new = || Arc::new(SeasonSlot { version, data: tokio::sync::OnceCell::new() });
+        match self.seasons.get_mut(&season) {
+            Some((slot, used)) if slot.version == version => {
+                *used = clock;
+                return slot.clone();
+            }
+            Some((slot, _)) if slot.version > version => return new(),
+            _ => {}
+        }
         if !self.seasons.contains_key(&season) && self.seasons.len() >= MAX_CACHED_SEASONS {
             if let Some(oldest) = self.seasons.iter().min_by_key(|(_, (_, used))| *used).map(|(s, _)| *s) {
                 self.seasons.remove(&oldest);
             }
         }
-        self.seasons.insert(season, (data, self.clock));
+        let slot = new();
+        self.seasons.insert(season, (slot.clone(), clock));
+        slot
     }
 }
 
@@ -203,29 +216,28 @@ impl BoardCache {
     }
 
     async fn season(&self, pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
-        use crate::results::Selection;
         let version = self.version(pool).await?;
-        if let Some(data) = self.seasons.lock().ok().and_then(|mut m| m.get(season)) {
-            if data.version == version {
-                return Ok(data);
-            }
-        }
+        let slot = match self.seasons.lock() {
+            Ok(mut seasons) => seasons.slot(season, version),
+            Err(_) => Arc::new(SeasonSlot { version, data: tokio::sync::OnceCell::new() }),
+        };
         // Read after the version: the data is at least as new as the version it is kept under.
-        let mut tags = BTreeMap::new();
-        crate::results::scene_tags(pool, Selection::Published(season), &mut tags).await?;
-        let data = Arc::new(SeasonData {
-            version,
-            sets: crate::results::published(pool, season).await?,
-            runs: crate::results::runs(pool, Selection::Published(season)).await?,
-            tags,
-            boards: Mutex::new(HashMap::new()),
-            pages: Mutex::new(HashMap::new()),
-        });
-        if let Ok(mut map) = self.seasons.lock() {
-            map.keep(season, data.clone());
-        }
-        Ok(data)
+        let data = slot.data.get_or_try_init(|| load_season(pool, season)).await?;
+        Ok(data.clone())
     }
+}
+
+async fn load_season(pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
+    use crate::results::Selection;
+    let mut tags = BTreeMap::new();
+    crate::results::scene_tags(pool, Selection::Published(season), &mut tags).await?;
+    Ok(Arc::new(SeasonData {
+        sets: crate::results::published(pool, season).await?,
+        runs: crate::results::runs(pool, Selection::Published(season)).await?,
+        tags,
+        boards: Mutex::new(HashMap::new()),
+        pages: Mutex::new(HashMap::new()),
+    }))
 }
 
 /// Builds the board of `query.season` (or `extra`'s season), adding
@@ -561,26 +573,21 @@ mod tests {
 
     #[test]
     fn the_season_cache_keeps_a_bounded_number_of_seasons_the_least_recently_read_leaving_first() {
-        let empty = || {
-            Arc::new(SeasonData {
-                version: 0,
-                sets: Vec::new(),
-                runs: Vec::new(),
-                tags: BTreeMap::new(),
-                boards: Mutex::new(HashMap::new()),
-                pages: Mutex::new(HashMap::new()),
-            })
-        };
         let mut cache = CachedSeasons::default();
-        cache.keep(1, empty());
+        let first = cache.slot(1, 0);
         // Asking for season after season (a query parameter) never grows it past the bound.
         for season in 2..1000 {
-            assert!(cache.get(1).is_some(), "the season read all along stays");
-            cache.keep(season, empty());
+            assert!(Arc::ptr_eq(&cache.slot(1, 0), &first), "the season read all along stays");
+            cache.slot(season, 0);
             assert!(cache.seasons.len() <= MAX_CACHED_SEASONS);
         }
         assert_eq!(cache.seasons.len(), MAX_CACHED_SEASONS);
-        assert!(cache.get(999).is_some() && cache.get(2).is_none());
+        assert!(cache.seasons.contains_key(&999) && !cache.seasons.contains_key(&2));
+        // A publish replaces the season's data; a reader of the version before it does not put it back.
+        let newer = cache.slot(1, 1);
+        assert!(!Arc::ptr_eq(&newer, &first));
+        assert!(!Arc::ptr_eq(&cache.slot(1, 0), &newer));
+        assert!(Arc::ptr_eq(&cache.slot(1, 1), &newer));
     }
 
     #[test]

@@ -11,10 +11,14 @@
 //! waiting together, [`crate::results::SharedBoardVersion`]), so another
 //! instance's publish shows at once.
 //!
+//! Each (query, version) is rendered once: readers who miss it together
+//! (a publish makes every open board miss at once) wait for the first
+//! one's rendering instead of each rendering their own, which on 2 cores
+//! stalled a cold board for seconds at 100 connections.
+//!
 //! A browser asks for gzip: each kept rendering keeps a gzip copy too, made
 //! by its first reader who asks for gzip, instead of once per request (the
-//! page is 180 KB with 20 techniques). Readers who render the same version
-//! at once all share the first rendering kept, and so its one gzip copy.
+//! page is 180 KB with 20 techniques).
 
 use crate::leaderboard::{BoardCache, BoardQuery};
 use crate::routes::ApiError;
@@ -47,7 +51,6 @@ impl Rendering {
 type Key = (Rendering, Option<i64>, Option<String>, Option<String>);
 
 struct Kept {
-    version: i64,
     etag: HeaderValue,
     body: Bytes,
     /// The same body gzip-encoded, under its own ETag (another representation).
@@ -66,9 +69,16 @@ impl Kept {
 /// renders, but past this nothing more is kept.
 pub const MAX_KEPT: usize = 256;
 
+/// One query's rendering of one board version: rendered by the first
+/// reader, awaited by the others.
+struct Slot {
+    version: i64,
+    kept: tokio::sync::OnceCell<Arc<Kept>>,
+}
+
 /// The public boards rendered for anonymous readers.
 #[derive(Clone, Default)]
-pub struct PublicBoards(Arc<Mutex<HashMap<Key, Arc<Kept>>>>);
+pub struct PublicBoards(Arc<Mutex<HashMap<Key, Arc<Slot>>>>);
 
 impl PublicBoards {
     /// The answer to an anonymous reader of `query` as `rendering`: the kept
@@ -85,11 +95,7 @@ impl PublicBoards {
     ) -> Result<Response, ApiError> {
         let key = (rendering, query.season, query.sort.clone(), query.tag.clone());
         let version = boards.version(pool).await?;
-        let kept = self.0.lock().ok().and_then(|k| k.get(&key).filter(|k| k.version == version).cloned());
-        let kept = match kept {
-            Some(kept) => kept,
-            None => self.keep(key, version, render.await?)?,
-        };
+        let kept = self.kept(key, version, render).await?;
         let gzip = if accepts_gzip(request) { kept.gzip() } else { None };
         let (etag, body) = match gzip {
             Some(gzip) => (&kept.gzip_etag, gzip),
@@ -113,30 +119,49 @@ impl PublicBoards {
         Ok(response)
     }
 
-    fn keep(&self, key: Key, version: i64, body: String) -> Result<Arc<Kept>, ApiError> {
+    /// The rendering of `key` at `version`: the one kept, the one another
+    /// reader is making (awaited), or `render`'s. If the renderer fails or
+    /// goes away, the next waiter renders.
+    async fn kept(
+        &self,
+        key: Key,
+        version: i64,
+        render: impl std::future::Future<Output = Result<String, ApiError>>,
+    ) -> Result<Arc<Kept>, ApiError> {
+        let slot = self.slot(&key, version);
+        let kept = slot.kept.get_or_try_init(|| async { Kept::new(&key, version, render.await?) }).await?;
+        Ok(kept.clone())
+    }
+
+    /// The slot of `key` at `version`, kept for the readers after this one
+    /// unless a newer version is kept already (this reader's version read
+    /// began before its publish) or too many queries are.
+    fn slot(&self, key: &Key, version: i64) -> Arc<Slot> {
+        let new = || Arc::new(Slot { version, kept: tokio::sync::OnceCell::new() });
+        let Ok(mut all) = self.0.lock() else { return new() };
+        match all.get(key) {
+            Some(slot) if slot.version == version => return slot.clone(),
+            Some(slot) if slot.version > version => return new(),
+            _ => {}
+        }
+        // Renderings of an older version go first.
+        all.retain(|_, slot| slot.version >= version);
+        let slot = new();
+        if all.len() < MAX_KEPT || all.contains_key(key) {
+            all.insert(key.clone(), slot.clone());
+        }
+        slot
+    }
+}
+
+impl Kept {
+    fn new(key: &Key, version: i64, body: String) -> Result<Arc<Kept>, ApiError> {
         use sha2::Digest;
         let query = format!("{:x}", sha2::Sha256::digest(format!("{key:?}")));
         let tag = |suffix: &str| {
             HeaderValue::from_str(&format!("\"{version}-{}{suffix}\"", &query[..16])).map_err(ApiError::internal)
         };
-        let kept = Arc::new(Kept {
-            version,
-            etag: tag("")?,
-            gzip_etag: tag("-gzip")?,
-            gzip: OnceLock::new(),
-            body: body.into(),
-        });
-        let Ok(mut all) = self.0.lock() else { return Ok(kept) };
-        // Another reader kept this version first: share it (and its gzip copy).
-        if let Some(first) = all.get(&key).filter(|k| k.version == version) {
-            return Ok(first.clone());
-        }
-        // Renderings of an older version go first.
-        all.retain(|_, k| k.version >= version);
-        if all.len() < MAX_KEPT || all.contains_key(&key) {
-            all.insert(key, kept.clone());
-        }
-        Ok(kept)
+        Ok(Arc::new(Kept { etag: tag("")?, gzip_etag: tag("-gzip")?, gzip: OnceLock::new(), body: body.into() }))
     }
 }
 
@@ -177,5 +202,43 @@ mod tests {
         assert!(takes("gzip, deflate, br") && takes("br;q=1.0, GZIP;q=0.5") && takes("gzip"));
         assert!(!takes("gzip;q=0") && !takes("gzip; q=0.000") && !takes("br, deflate") && !takes("x-gzip-not"));
         assert!(!accepts_gzip(&HeaderMap::new()), "no header: the body as it is");
+    }
+
+    /// A publish makes every reader of an open board miss at once.
+    #[tokio::test]
+    async fn readers_who_miss_together_share_one_rendering() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let boards = PublicBoards::default();
+        let renders = Arc::new(AtomicUsize::new(0));
+        let key: Key = (Rendering::Html, None, None, None);
+        let readers: Vec<_> = (0..50)
+            .map(|_| {
+                let (boards, renders, key) = (boards.clone(), renders.clone(), key.clone());
+                tokio::spawn(async move {
+                    let render = async {
+                        renders.fetch_add(1, Ordering::SeqCst);
+                        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+                        Ok("the board at version 7".to_string())
+                    };
+                    boards.kept(key, 7, render).await.map(|kept| kept.body.clone())
+                })
+            })
+            .collect();
+        for reader in readers {
+            assert_eq!(reader.await.unwrap().unwrap(), "the board at version 7");
+        }
+        assert_eq!(renders.load(Ordering::SeqCst), 1, "rendered once for 50 readers");
+
+        // A failed rendering is not kept: the next reader renders again.
+        let failed = boards.kept(key.clone(), 8, async { Err(ApiError::internal("the database went away")) }).await;
+        assert!(failed.is_err());
+        let next = boards.kept(key.clone(), 8, async { Ok("the board at version 8".to_string()) }).await;
+        assert_eq!(next.unwrap().body, "the board at version 8");
+
+        // A reader whose version read began before a publish does not put the older board back.
+        let late = boards.kept(key.clone(), 7, async { Ok("the board at version 7, late".to_string()) }).await;
+        assert_eq!(late.unwrap().body, "the board at version 7, late");
+        let current = boards.kept(key, 8, async { Ok("rendered again".to_string()) }).await;
+        assert_eq!(current.unwrap().body, "the board at version 8", "version 8 is still the one kept");
     }
 }
