@@ -91,6 +91,9 @@ fn load(path: &Path) -> anyhow::Result<fbksd_embree::scene::Scene> {
 
 fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
+    if cli.command.is_some() {
+        fbksd_renderer::end_quietly_when_stdout_closes();
+    }
     match (cli.command, cli.scene) {
         (None, Some(scene)) => fbksd_embree::serve(load(&scene)?)?,
         (None, None) => anyhow::bail!("usage: fbksd-embree <scene.pbrt> (see --help)"),

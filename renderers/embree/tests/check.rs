@@ -53,3 +53,26 @@ fn check_of_a_scene_that_loads_prints_its_info() {
     assert!(out.contains("It loads:") && out.contains("width = 16") && out.contains("height = 12"), "{out}");
     assert!(!out.contains("would need"), "{out}");
 }
+
+#[test]
+fn check_piped_into_a_reader_that_stops_ends_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.pbrt");
+    std::fs::write(&path, SCENE).unwrap();
+    // As `fbksd-embree check scene.pbrt | head -0`: the reader is gone before the first line.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fbksd-embree"))
+        .arg("check")
+        .arg(&path)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    const SIGPIPE: i32 = 13;
+    assert_eq!(out.status.signal(), Some(SIGPIPE), "ended by the closed pipe, as `head` expects: {stderr}");
+}

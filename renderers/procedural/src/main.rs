@@ -67,6 +67,9 @@ fn load(path: &Path) -> anyhow::Result<Scene> {
 
 fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
+    if cli.command.is_some() {
+        fbksd_renderer::end_quietly_when_stdout_closes();
+    }
     match (cli.command, cli.scene) {
         (None, Some(scene)) => fbksd_procedural::serve(load(&scene)?)?,
         (None, None) => bail!("usage: fbksd-procedural <scene> (see --help)"),

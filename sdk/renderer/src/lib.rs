@@ -48,4 +48,15 @@ pub mod sampler;
 mod server;
 
 pub use plan::plan_tiles;
+/// For a renderer's command-line subcommands, not its protocol server: when
+/// the reader of standard output goes away (`… bench | head`), end quietly
+/// as command-line tools do, instead of panicking in `println!`. Call it
+/// before any thread starts.
+pub fn end_quietly_when_stdout_closes() {
+    // SAFETY: restores the default action of one signal; no handler runs Rust code.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 pub use server::{sample_stream, Evaluation, MappingGuard, RendererError, RenderingServer, SampleBuffer, SamplesPipe};
