@@ -22,6 +22,7 @@
 //! fixes the original's bias.
 
 use crate::results::{ResultSet, StoredRun};
+use crate::versioned::{Pick, Versioned};
 use fbksd_exchange::ranking::{equal_spp, equal_time, At};
 use fbksd_exchange::results::IndexEntry;
 use fbksd_exchange::stats::Interval;
@@ -166,44 +167,30 @@ pub struct BoardCache {
     version: crate::results::SharedBoardVersion,
 }
 
-/// One season's data at one board version: loaded by its first reader,
-/// awaited by the readers who miss it at the same time (a publish makes
-/// them all miss at once).
-struct SeasonSlot {
-    version: i64,
-    data: tokio::sync::OnceCell<Arc<SeasonData>>,
-}
-
 #[derive(Default)]
 struct CachedSeasons {
-    /// Season → (its slot, when it was last read, by `clock`).
-    seasons: HashMap<i64, (Arc<SeasonSlot>, u64)>,
+    /// Season → (its data's slot, when it was last read, by `clock`).
+    seasons: HashMap<i64, (Arc<Versioned<SeasonData>>, u64)>,
     clock: u64,
 }
 
 impl CachedSeasons {
-    /// The slot of `season` at `version`, kept for later readers unless a
-    /// newer version is kept already (this reader's version read began
-    /// before its publish).
-    fn slot(&mut self, season: i64, version: i64) -> Arc<SeasonSlot> {
+    /// The slot of `season`'s data at `version` ([`Versioned::pick`]).
+    fn slot(&mut self, season: i64, version: i64) -> Arc<Versioned<SeasonData>> {
         self.clock += 1;
-        let clock = self.clock;
-        let new = || Arc::new(SeasonSlot { version, data: tokio::sync::OnceCell::new() });
-        match self.seasons.get_mut(&season) {
-            Some((slot, used)) if slot.version == version => {
-                *used = clock;
-                return slot.clone();
+        let slot = match Versioned::pick(self.seasons.get(&season).map(|(slot, _)| slot), version) {
+            Pick::Share(slot) => slot,
+            Pick::Alone(slot) => return slot,
+            Pick::Keep(slot) => {
+                if !self.seasons.contains_key(&season) && self.seasons.len() >= MAX_CACHED_SEASONS {
+                    if let Some(oldest) = self.seasons.iter().min_by_key(|(_, (_, used))| *used).map(|(s, _)| *s) {
+                        self.seasons.remove(&oldest);
+                    }
+                }
+                slot
             }
-            Some((slot, _)) if slot.version > version => return new(),
-            _ => {}
-        }
-        if !self.seasons.contains_key(&season) && self.seasons.len() >= MAX_CACHED_SEASONS {
-            if let Some(oldest) = self.seasons.iter().min_by_key(|(_, (_, used))| *used).map(|(s, _)| *s) {
-                self.seasons.remove(&oldest);
-            }
-        }
-        let slot = new();
-        self.seasons.insert(season, (slot.clone(), clock));
+        };
+        self.seasons.insert(season, (slot.clone(), self.clock));
         slot
     }
 }
@@ -219,25 +206,24 @@ impl BoardCache {
         let version = self.version(pool).await?;
         let slot = match self.seasons.lock() {
             Ok(mut seasons) => seasons.slot(season, version),
-            Err(_) => Arc::new(SeasonSlot { version, data: tokio::sync::OnceCell::new() }),
+            Err(_) => Versioned::new(version),
         };
         // Read after the version: the data is at least as new as the version it is kept under.
-        let data = slot.data.get_or_try_init(|| load_season(pool, season)).await?;
-        Ok(data.clone())
+        slot.get_or_try_make(|| load_season(pool, season)).await
     }
 }
 
-async fn load_season(pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
+async fn load_season(pool: &AnyPool, season: i64) -> Result<SeasonData, sqlx::Error> {
     use crate::results::Selection;
     let mut tags = BTreeMap::new();
     crate::results::scene_tags(pool, Selection::Published(season), &mut tags).await?;
-    Ok(Arc::new(SeasonData {
+    Ok(SeasonData {
         sets: crate::results::published(pool, season).await?,
         runs: crate::results::runs(pool, Selection::Published(season)).await?,
         tags,
         boards: Mutex::new(HashMap::new()),
         pages: Mutex::new(HashMap::new()),
-    }))
+    })
 }
 
 /// Builds the board of `query.season` (or `extra`'s season), adding

@@ -39,6 +39,7 @@ pub mod routes;
 pub mod runners;
 pub mod telemetry;
 pub mod throttle;
+pub mod versioned;
 pub mod viewer;
 
 pub use app::{AppState, Application};

@@ -13,8 +13,7 @@
 //!
 //! Each (query, version) is rendered once: readers who miss it together
 //! (a publish makes every open board miss at once) wait for the first
-//! one's rendering instead of each rendering their own, which on 2 cores
-//! stalled a cold board for seconds at 100 connections.
+//! one's rendering ([`crate::versioned`]).
 //!
 //! A browser asks for gzip: each kept rendering keeps a gzip copy too, made
 //! by its first reader who asks for gzip, instead of once per request (the
@@ -22,6 +21,7 @@
 
 use crate::leaderboard::{BoardCache, BoardQuery};
 use crate::routes::ApiError;
+use crate::versioned::{Pick, Versioned};
 use axum::body::Bytes;
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -59,26 +59,13 @@ struct Kept {
     gzip: OnceLock<Option<Bytes>>,
 }
 
-impl Kept {
-    fn gzip(&self) -> Option<&Bytes> {
-        self.gzip.get_or_init(|| gzip(&self.body).ok().map(Bytes::from)).as_ref()
-    }
-}
-
 /// Renderings kept at most: a query naming no existing metric or tag still
 /// renders, but past this nothing more is kept.
 pub const MAX_KEPT: usize = 256;
 
-/// One query's rendering of one board version: rendered by the first
-/// reader, awaited by the others.
-struct Slot {
-    version: i64,
-    kept: tokio::sync::OnceCell<Arc<Kept>>,
-}
-
 /// The public boards rendered for anonymous readers.
 #[derive(Clone, Default)]
-pub struct PublicBoards(Arc<Mutex<HashMap<Key, Arc<Slot>>>>);
+pub struct PublicBoards(Arc<Mutex<HashMap<Key, Arc<Versioned<Kept>>>>>);
 
 impl PublicBoards {
     /// The answer to an anonymous reader of `query` as `rendering`: the kept
@@ -120,8 +107,7 @@ impl PublicBoards {
     }
 
     /// The rendering of `key` at `version`: the one kept, the one another
-    /// reader is making (awaited), or `render`'s. If the renderer fails or
-    /// goes away, the next waiter renders.
+    /// reader is making (awaited), or `render`'s.
     async fn kept(
         &self,
         key: Key,
@@ -129,39 +115,39 @@ impl PublicBoards {
         render: impl std::future::Future<Output = Result<String, ApiError>>,
     ) -> Result<Arc<Kept>, ApiError> {
         let slot = self.slot(&key, version);
-        let kept = slot.kept.get_or_try_init(|| async { Kept::new(&key, version, render.await?) }).await?;
-        Ok(kept.clone())
+        slot.get_or_try_make(|| async { Kept::new(&key, version, render.await?) }).await
     }
 
-    /// The slot of `key` at `version`, kept for the readers after this one
-    /// unless a newer version is kept already (this reader's version read
-    /// began before its publish) or too many queries are.
-    fn slot(&self, key: &Key, version: i64) -> Arc<Slot> {
-        let new = || Arc::new(Slot { version, kept: tokio::sync::OnceCell::new() });
-        let Ok(mut all) = self.0.lock() else { return new() };
-        match all.get(key) {
-            Some(slot) if slot.version == version => return slot.clone(),
-            Some(slot) if slot.version > version => return new(),
-            _ => {}
+    /// The slot of `key` at `version` ([`Versioned::pick`]), kept for the
+    /// readers after this one unless too many queries are.
+    fn slot(&self, key: &Key, version: i64) -> Arc<Versioned<Kept>> {
+        let Ok(mut all) = self.0.lock() else { return Versioned::new(version) };
+        match Versioned::pick(all.get(key), version) {
+            Pick::Share(slot) | Pick::Alone(slot) => slot,
+            Pick::Keep(slot) => {
+                // Renderings of an older version go first.
+                all.retain(|_, kept| kept.version() >= version);
+                if all.len() < MAX_KEPT || all.contains_key(key) {
+                    all.insert(key.clone(), slot.clone());
+                }
+                slot
+            }
         }
-        // Renderings of an older version go first.
-        all.retain(|_, slot| slot.version >= version);
-        let slot = new();
-        if all.len() < MAX_KEPT || all.contains_key(key) {
-            all.insert(key.clone(), slot.clone());
-        }
-        slot
     }
 }
 
 impl Kept {
-    fn new(key: &Key, version: i64, body: String) -> Result<Arc<Kept>, ApiError> {
+    fn new(key: &Key, version: i64, body: String) -> Result<Kept, ApiError> {
         use sha2::Digest;
         let query = format!("{:x}", sha2::Sha256::digest(format!("{key:?}")));
         let tag = |suffix: &str| {
             HeaderValue::from_str(&format!("\"{version}-{}{suffix}\"", &query[..16])).map_err(ApiError::internal)
         };
-        Ok(Arc::new(Kept { etag: tag("")?, gzip_etag: tag("-gzip")?, gzip: OnceLock::new(), body: body.into() }))
+        Ok(Kept { etag: tag("")?, gzip_etag: tag("-gzip")?, gzip: OnceLock::new(), body: body.into() })
+    }
+
+    fn gzip(&self) -> Option<&Bytes> {
+        self.gzip.get_or_init(|| gzip(&self.body).ok().map(Bytes::from)).as_ref()
     }
 }
 
