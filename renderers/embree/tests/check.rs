@@ -14,11 +14,19 @@ Shape "frobnicated"
 Shape "sphere"
 "#;
 
-fn check(text: &str) -> (bool, String) {
+/// `fbksd-embree check` of `text` as a scene file, not yet started.
+fn check_command(text: &str) -> (tempfile::TempDir, Command) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("scene.pbrt");
     std::fs::write(&path, text).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_fbksd-embree")).arg("check").arg(&path).output().unwrap();
+    let mut command = Command::new(env!("CARGO_BIN_EXE_fbksd-embree"));
+    command.arg("check").arg(&path);
+    (dir, command)
+}
+
+fn check(text: &str) -> (bool, String) {
+    let (_dir, mut command) = check_command(text);
+    let out = command.output().unwrap();
     (out.status.success(), String::from_utf8(out.stdout).unwrap())
 }
 
@@ -58,17 +66,9 @@ fn check_of_a_scene_that_loads_prints_its_info() {
 fn check_piped_into_a_reader_that_stops_ends_quietly() {
     use std::os::unix::process::ExitStatusExt;
     use std::process::Stdio;
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scene.pbrt");
-    std::fs::write(&path, SCENE).unwrap();
+    let (_dir, mut command) = check_command(SCENE);
     // As `fbksd-embree check scene.pbrt | head -0`: the reader is gone before the first line.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_fbksd-embree"))
-        .arg("check")
-        .arg(&path)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
     drop(child.stdout.take());
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -48,6 +48,8 @@ pub mod sampler;
 mod server;
 
 pub use plan::plan_tiles;
+pub use server::{sample_stream, Evaluation, MappingGuard, RendererError, RenderingServer, SampleBuffer, SamplesPipe};
+
 /// For a renderer's command-line subcommands, not its protocol server: when
 /// the reader of standard output goes away (`… bench | head`), end quietly
 /// as command-line tools do, instead of panicking in `println!`. Call it
@@ -58,5 +60,3 @@ pub fn end_quietly_when_stdout_closes() {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
-
-pub use server::{sample_stream, Evaluation, MappingGuard, RendererError, RenderingServer, SampleBuffer, SamplesPipe};
