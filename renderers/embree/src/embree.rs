@@ -1,7 +1,8 @@
 //! A small safe layer over Embree 3 (Debian's `libembree-dev`): a device, a
 //! scene of triangle meshes, spheres and Bézier curves with optional linear
 //! motion (two time steps) and single-level instances of prototype scenes,
-//! and batched intersection and occlusion queries traced in packets of 16.
+//! and intersection and occlusion queries traced in packets of 16 lanes,
+//! which the integrator fills straight from its own lanes.
 //!
 //! Hand-written rather than a binding crate: the renderer uses a dozen
 //! entry points, and the crates on the registry target other Embree
@@ -12,6 +13,8 @@
 
 use std::ffi::c_void;
 use std::ptr::NonNull;
+
+pub use sys::{Hit16 as HitLanes, Ray16 as RayPacket, RayHit16 as HitPacket, INVALID_ID};
 
 mod sys {
     use std::ffi::{c_char, c_int, c_uint, c_void};
@@ -34,9 +37,12 @@ mod sys {
     pub const FORMAT_FLOAT4: c_uint = 0x9004;
     pub const SCENE_FLAG_ROBUST: c_uint = 1 << 2;
     pub const BUILD_QUALITY_HIGH: c_uint = 2;
+    /// The geometry or instance id of no hit.
     pub const INVALID_ID: c_uint = u32::MAX;
 
-    /// RTCRay16.
+    /// Sixteen rays in Embree's layout (`RTCRay16`): lane `k` of each field
+    /// is ray `k`'s. `tfar` is −∞ after an occlusion query found a blocker.
+    #[allow(missing_docs)]
     #[repr(C, align(64))]
     #[derive(Debug, Clone, Copy, Default)]
     pub struct Ray16 {
@@ -54,7 +60,9 @@ mod sys {
         pub flags: [c_uint; 16],
     }
 
-    /// RTCHit16.
+    /// What sixteen rays hit, in Embree's layout (`RTCHit16`): `geom_id` is
+    /// `INVALID_ID` for a ray that hit nothing.
+    #[allow(missing_docs)]
     #[repr(C, align(64))]
     #[derive(Debug, Clone, Copy, Default)]
     pub struct Hit16 {
@@ -68,7 +76,8 @@ mod sys {
         pub inst_id: [[c_uint; 16]; 1],
     }
 
-    /// RTCRayHit16.
+    /// Sixteen rays and their hits (`RTCRayHit16`): `tfar` becomes the hit distance.
+    #[allow(missing_docs)]
     #[repr(C, align(64))]
     #[derive(Debug, Clone, Copy, Default)]
     pub struct RayHit16 {
@@ -340,102 +349,68 @@ impl Bvh {
         sys::IntersectContext { flags: 0, filter: std::ptr::null(), inst_id: [sys::INVALID_ID] }
     }
 
-    /// Answers closest-hit queries, calling `each` with every query's index
-    /// and hit, in order. The queries go to Embree in packets of 16, which costs less
-    /// per ray than one call each (a third less on the Cornell box) even when
-    /// the rays are incoherent; each packet is filled straight from
-    /// `queries` and answered before the next is filled.
-    pub fn intersect_each(
-        &self,
-        queries: impl IntoIterator<Item = Query>,
-        mut each: impl FnMut(usize, Option<RayHit>),
-    ) {
-        let mut queries = queries.into_iter().peekable();
-        let mut packet = sys::RayHit16::default();
-        let first_instance = self.geometry_count;
-        let mut answered = 0;
-        while queries.peek().is_some() {
-            let (valid, n) = packet.ray.load(&mut queries);
-            packet.hit.geom_id = [sys::INVALID_ID; LANES];
-            packet.hit.inst_id = [[sys::INVALID_ID; LANES]];
-            let mut context = Self::context();
-            // SAFETY: the scene is committed; the packet and mask have Embree's layout and alignment.
-            unsafe { sys::rtcIntersect16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, &mut packet) };
-            let (ray, hit) = (&packet.ray, &packet.hit);
-            for k in 0..n {
-                let instance = hit.inst_id[0][k];
-                each(
-                    answered + k,
-                    (hit.geom_id[k] != sys::INVALID_ID).then(|| RayHit {
-                        t: ray.tfar[k],
-                        geometry: hit.geom_id[k],
-                        primitive: hit.prim_id[k],
-                        uv: [hit.u[k], hit.v[k]],
-                        ng: [hit.ng_x[k], hit.ng_y[k], hit.ng_z[k]],
-                        instance: (instance != sys::INVALID_ID).then(|| instance - first_instance),
-                    }),
-                );
-            }
-            answered += n;
-        }
+    /// Finds the closest hit of each valid lane of `packet` (Embree's
+    /// `rtcIntersect16`), even when the rays are incoherent: a packet costs
+    /// less per ray than one call each (a third less on the Cornell box).
+    /// Read the answers with [`Bvh::hit`].
+    pub fn intersect(&self, valid: &Valid, packet: &mut HitPacket) {
+        packet.hit.geom_id = [sys::INVALID_ID; LANES];
+        packet.hit.inst_id = [[sys::INVALID_ID; LANES]];
+        let mut context = Self::context();
+        // SAFETY: the scene is committed; the packet and mask have Embree's layout and alignment.
+        unsafe { sys::rtcIntersect16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, packet) };
     }
 
-    /// Answers any-hit (shadow) queries, calling `each` with whether each is
-    /// blocked, in order, in packets as [`Bvh::intersect_each`] does.
-    pub fn occluded_each(&self, queries: impl IntoIterator<Item = Query>, mut each: impl FnMut(bool)) {
-        let mut queries = queries.into_iter().peekable();
-        let mut packet = sys::Ray16::default();
-        while queries.peek().is_some() {
-            let (valid, n) = packet.load(&mut queries);
-            let mut context = Self::context();
-            // SAFETY: as in intersect_each.
-            unsafe { sys::rtcOccluded16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, &mut packet) };
-            // Embree marks an occluded ray by setting its tfar to −∞.
-            packet.tfar[..n].iter().for_each(|t| each(*t == f32::NEG_INFINITY));
-        }
+    /// Tests each valid lane of `packet` for anything between `tnear` and
+    /// `tfar` (Embree's `rtcOccluded16`); see [`RayPacket::occluded`].
+    pub fn occluded(&self, valid: &Valid, packet: &mut RayPacket) {
+        let mut context = Self::context();
+        // SAFETY: as in intersect.
+        unsafe { sys::rtcOccluded16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, packet) };
     }
-}
 
-/// A ray query: the segment `org + t·dir` for `t` in (`tnear`, `tfar`), at
-/// `time` ∈ [0, 1] of the motion steps.
-#[derive(Debug, Clone, Copy)]
-pub struct Query {
-    /// Origin.
-    pub org: [f32; 3],
-    /// Direction (any length; `t` is in its units).
-    pub dir: [f32; 3],
-    /// Start of the segment.
-    pub tnear: f32,
-    /// End of the segment (may be infinite).
-    pub tfar: f32,
-    /// Motion time.
-    pub time: f32,
+    /// Lane `k`'s answer to [`Bvh::intersect`].
+    #[inline]
+    pub fn hit(&self, packet: &HitPacket, k: usize) -> Option<RayHit> {
+        let (ray, hit) = (&packet.ray, &packet.hit);
+        let instance = hit.inst_id[0][k];
+        (hit.geom_id[k] != sys::INVALID_ID).then(|| RayHit {
+            t: ray.tfar[k],
+            geometry: hit.geom_id[k],
+            primitive: hit.prim_id[k],
+            uv: [hit.u[k], hit.v[k]],
+            ng: [hit.ng_x[k], hit.ng_y[k], hit.ng_z[k]],
+            instance: (instance != sys::INVALID_ID).then(|| instance - self.geometry_count),
+        })
+    }
 }
 
 /// Rays per packet: Embree's widest, which it splits itself on narrower CPUs.
-const LANES: usize = 16;
+pub const LANES: usize = 16;
 
-/// A packet's lane mask, aligned as Embree requires.
+/// A packet's lane mask, aligned as Embree requires: −1 traces the lane, 0 leaves it.
 #[repr(C, align(64))]
-struct Valid([i32; LANES]);
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Valid(pub [i32; LANES]);
 
-impl sys::Ray16 {
-    /// Loads up to 16 queries from `queries`; the lanes past them are masked
-    /// off. Returns the mask and how many were loaded.
-    fn load(&mut self, queries: &mut impl Iterator<Item = Query>) -> (Valid, usize) {
-        let mut valid = Valid([0; LANES]);
-        let mut n = 0;
-        for (k, q) in queries.take(LANES).enumerate() {
-            [self.org_x[k], self.org_y[k], self.org_z[k]] = q.org;
-            [self.dir_x[k], self.dir_y[k], self.dir_z[k]] = q.dir;
-            self.tnear[k] = q.tnear;
-            self.tfar[k] = q.tfar;
-            self.time[k] = q.time;
-            self.mask[k] = u32::MAX;
-            valid.0[k] = -1;
-            n = k + 1;
-        }
-        (valid, n)
+impl RayPacket {
+    /// Sets lane `k` to the segment `org + t·dir` for `t` in (`tnear`,
+    /// `tfar`) at motion time `time` ∈ [0, 1].
+    #[inline(always)]
+    pub fn set(&mut self, k: usize, org: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32, time: f32) {
+        [self.org_x[k], self.org_y[k], self.org_z[k]] = org;
+        [self.dir_x[k], self.dir_y[k], self.dir_z[k]] = dir;
+        self.tnear[k] = tnear;
+        self.tfar[k] = tfar;
+        self.time[k] = time;
+        self.mask[k] = u32::MAX;
+        self.flags[k] = 0;
+    }
+
+    /// Whether [`Bvh::occluded`] found lane `k` blocked (Embree sets its `tfar` to −∞).
+    #[inline(always)]
+    pub fn occluded(&self, k: usize) -> bool {
+        self.tfar[k] == f32::NEG_INFINITY
     }
 }
 
@@ -461,6 +436,32 @@ mod tests {
         assert!(config.contains("#define EMBREE_MIN_WIDTH 0"));
     }
 
+    /// A segment along +z from `(x, y, 0)`: (x, y, tfar, time).
+    type Segment = (f32, f32, f32, f32);
+
+    /// Fills one packet with `segments` (the rest of its lanes masked off).
+    fn packet(segments: &[Segment]) -> (Valid, RayPacket) {
+        let (mut valid, mut packet) = (Valid([0; LANES]), RayPacket::default());
+        for (k, &(x, y, tfar, time)) in segments.iter().enumerate() {
+            packet.set(k, [x, y, 0.0], [0.0, 0.0, 1.0], 0.0, tfar, time);
+            valid.0[k] = -1;
+        }
+        (valid, packet)
+    }
+
+    fn hits(bvh: &Bvh, segments: &[Segment]) -> Vec<Option<RayHit>> {
+        let (valid, ray) = packet(segments);
+        let mut packet = HitPacket { ray, hit: HitLanes::default() };
+        bvh.intersect(&valid, &mut packet);
+        (0..segments.len()).map(|k| bvh.hit(&packet, k)).collect()
+    }
+
+    fn occluded(bvh: &Bvh, segments: &[Segment]) -> Vec<bool> {
+        let (valid, mut packet) = packet(segments);
+        bvh.occluded(&valid, &mut packet);
+        (0..segments.len()).map(|k| packet.occluded(k)).collect()
+    }
+
     #[test]
     fn a_moving_triangle_is_hit_where_it_is_at_the_ray_time() {
         let at0 = [[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]];
@@ -468,40 +469,31 @@ mod tests {
         let indices = [[0u32, 1, 2]];
         let bvh =
             Bvh::build(&[Primitives::Triangles { positions: vec![&at0, &at1], indices: &indices }], &[], &[]).unwrap();
-        let query =
-            |x: f32, tfar: f32, time: f32| Query { org: [x, 0.2, 0.0], dir: [0.0, 0.0, 1.0], tnear: 0.0, tfar, time };
-        let mut hits = Vec::new();
-        bvh.intersect_each([query(0.2, f32::INFINITY, 0.0), query(0.2, f32::INFINITY, 1.0)], |_, h| hits.push(h));
-        assert!(hits[0].is_some_and(|h| (h.t - 5.0).abs() < 1e-5));
-        assert!(hits[1].is_none());
-        let mut occluded = Vec::new();
-        bvh.occluded_each([query(10.2, 10.0, 1.0), query(10.2, 4.0, 1.0)], |o| occluded.push(o));
-        assert_eq!(occluded, [true, false]);
+        let found = hits(&bvh, &[(0.2, 0.2, f32::INFINITY, 0.0), (0.2, 0.2, f32::INFINITY, 1.0)]);
+        assert!(found[0].is_some_and(|h| (h.t - 5.0).abs() < 1e-5));
+        assert!(found[1].is_none());
+        assert_eq!(occluded(&bvh, &[(10.2, 0.2, 10.0, 1.0), (10.2, 0.2, 4.0, 1.0)]), [true, false]);
     }
 
     #[test]
-    fn a_batch_answers_each_query_in_order_across_packets() {
-        // A wall of triangles at z = 5; queries alternate between hitting it
-        // and passing beside it, over 37 queries (three packets, the last partial).
+    fn a_packet_answers_each_lane_and_only_its_valid_lanes() {
+        // A wall of triangles at z = 5; lanes alternate between hitting it
+        // and passing beside it, and the last three are masked off.
         let wall = [[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]];
         let indices = [[0u32, 1, 2]];
         let bvh = Bvh::build(&[Primitives::Triangles { positions: vec![&wall], indices: &indices }], &[], &[]).unwrap();
-        let queries: Vec<Query> = (0..37)
-            .map(|i| Query {
-                org: [if i % 3 == 0 { 5.0 } else { 0.1 }, 0.1, i as f32 * 0.01],
-                dir: [0.0, 0.0, 1.0],
-                tnear: 0.0,
-                tfar: f32::INFINITY,
-                time: 0.0,
-            })
-            .collect();
-        let mut hits = Vec::new();
-        bvh.intersect_each(queries, |_, h| hits.push(h));
-        assert_eq!(hits.len(), 37);
-        for (i, hit) in hits.iter().enumerate() {
-            match hit {
-                Some(h) => assert!(i % 3 != 0 && (h.t - (5.0 - i as f32 * 0.01)).abs() < 1e-5, "query {i}: {h:?}"),
-                None => assert_eq!(i % 3, 0, "query {i} missed"),
+        let segments: Vec<Segment> =
+            (0..13).map(|i| (if i % 3 == 0 { 5.0 } else { 0.1 }, 0.1, f32::INFINITY, 0.0)).collect();
+        let (mut valid, ray) = packet(&segments);
+        valid.0[13..].fill(0);
+        let mut packet = HitPacket { ray, hit: HitLanes::default() };
+        // A masked lane's ray would hit the wall: it must not be answered.
+        packet.ray.set(14, [0.1, 0.1, 0.0], [0.0, 0.0, 1.0], 0.0, f32::INFINITY, 0.0);
+        bvh.intersect(&valid, &mut packet);
+        for i in 0..LANES {
+            match bvh.hit(&packet, i) {
+                Some(h) => assert!(i < 13 && i % 3 != 0 && (h.t - 5.0).abs() < 1e-5, "lane {i}: {h:?}"),
+                None => assert!(i >= 13 || i % 3 == 0, "lane {i} missed"),
             }
         }
     }

@@ -7,8 +7,9 @@
 //! - [`scene`]: camera, shapes, textures, materials, lights, and the BVH.
 //! - [`bsdf`]: the scattering models, in the local shading frame.
 //! - [`integrator`]: path tracing with NEE, MIS and Russian roulette, and
-//!   every feature of the sample layout; paths are traced in batches whose
-//!   rays go to Embree together (wavefront style).
+//!   every feature of the sample layout; paths are traced in batches,
+//!   wavefront style, their rays going to Embree in packets and their
+//!   common cases shaded in SIMD lanes ([`lanes`]).
 //! - [`render`]: the protocol's tiles, and in-process rendering.
 //! - [`embree`]: the thin layer over Embree.
 //!
@@ -25,6 +26,7 @@ pub mod bench;
 pub mod bsdf;
 pub mod embree;
 pub mod integrator;
+pub mod lanes;
 pub mod math;
 pub mod pbrt;
 pub mod reference;

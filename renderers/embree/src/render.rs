@@ -209,7 +209,7 @@ pub fn fill(
                 match source {
                     None => {}
                     Some(Source::Parameter(d)) => *slot = p[*d] as f32,
-                    Some(Source::Feature(f, n)) => *slot = feature(&values, *f, *n),
+                    Some(Source::Feature(f, n)) => *slot = feature(values, *f, *n),
                 }
             }
         }
@@ -310,7 +310,7 @@ fn pixel_means(
                 if v.repaired {
                     repairs.0.fetch_add(1, Ordering::Relaxed);
                 }
-                for (total, value) in sums[x].iter_mut().zip(values(&v)) {
+                for (total, value) in sums[x].iter_mut().zip(values(v)) {
                     *total += value as f64;
                 }
             }

@@ -11,6 +11,7 @@
 //! samples (count requests) are uniform over the image.
 
 /// SplitMix64 finaliser.
+#[inline]
 pub fn mix(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -464,6 +465,13 @@ impl Dimensions {
     #[inline]
     pub fn of_free_sample(sampler: &Sampler, index: u64) -> Self {
         Dimensions { seed: mix(mix(u64::MAX - sampler.request) ^ mix(index ^ 0x8CB9_2BA7_2F3D_8DD7)) }
+    }
+
+    /// The dimensions of the sample whose key is `key` (see [`Dimensions::key`]):
+    /// a renderer that keeps its paths' keys in lanes rebuilds them here.
+    #[inline(always)]
+    pub fn from_key(key: u64) -> Self {
+        Dimensions { seed: key }
     }
 
     /// The 64-bit key every dimension is hashed from: a renderer with its

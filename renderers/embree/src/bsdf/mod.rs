@@ -21,6 +21,7 @@ pub mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
 
+use crate::lanes::{F32s, Vec3s};
 use crate::math::{vec3, Vec3};
 
 /// A direction sampled from a BSDF.
@@ -69,12 +70,14 @@ fn upper(w: Vec3, flip: bool) -> Vec3 {
 
 impl Bsdf {
     /// Whether the model only reflects (and so is two-sided).
+    #[inline(always)]
     fn reflective(&self) -> bool {
         !matches!(self, Bsdf::Dielectric(_) | Bsdf::DiffuseTransmission(_) | Bsdf::ThinDielectric(_))
     }
 
     /// Whether every lobe is a delta: no light sampling, and the surface
     /// does not count as the "first non-specular" hit.
+    #[inline(always)]
     pub fn is_delta(&self) -> bool {
         match self {
             Bsdf::Diffuse(_) => false,
@@ -86,6 +89,7 @@ impl Bsdf {
     }
 
     /// The BSDF value f(wo, wi) (delta lobes excluded).
+    #[inline(always)]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         let flip = self.reflective() && wo.z < 0.0;
         let (wo, wi) = (upper(wo, flip), upper(wi, flip));
@@ -100,6 +104,7 @@ impl Bsdf {
     }
 
     /// The part of f(wo, wi) from lobes at least as rough as `threshold`.
+    #[inline(always)]
     pub fn eval_diffuse_part(&self, wo: Vec3, wi: Vec3, threshold: f32) -> Vec3 {
         let flip = self.reflective() && wo.z < 0.0;
         let (wo, wi) = (upper(wo, flip), upper(wi, flip));
@@ -118,6 +123,7 @@ impl Bsdf {
     }
 
     /// The density of [`Bsdf::sample`] producing `wi` (delta lobes excluded).
+    #[inline(always)]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let flip = self.reflective() && wo.z < 0.0;
         let (wo, wi) = (upper(wo, flip), upper(wi, flip));
@@ -137,6 +143,7 @@ impl Bsdf {
     }
 
     /// Samples an incident direction with `uc` ∈ [0, 1) (lobe choice) and `u` ∈ [0, 1)².
+    #[inline(always)]
     pub fn sample(&self, wo: Vec3, uc: f32, u: [f32; 2]) -> Option<BsdfSample> {
         let flip = self.reflective() && wo.z < 0.0;
         let wo = upper(wo, flip);
@@ -155,10 +162,17 @@ impl Bsdf {
 
 /// A cosine-weighted direction on the upper hemisphere (Malley's method
 /// on the concentric disk, which keeps strata compact).
-#[inline]
+#[inline(always)]
 pub fn cosine_hemisphere(u: [f32; 2]) -> Vec3 {
     let (x, y) = crate::scene::camera::concentric_disk(u);
     vec3(x, y, (1.0 - x * x - y * y).max(0.0).sqrt())
+}
+
+/// [`cosine_hemisphere`] in lanes.
+#[inline(always)]
+pub fn cosine_hemisphere_lanes(u: [F32s; 2]) -> Vec3s {
+    let (x, y) = crate::scene::camera::concentric_disk_lanes(u);
+    Vec3s::new(x, y, (F32s::splat(1.0) - x * x - y * y).max(F32s::splat(0.0)).sqrt())
 }
 
 /// Whether two local directions lie on the same side of the surface.

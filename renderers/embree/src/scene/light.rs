@@ -5,6 +5,7 @@
 //! importance sampling; a delta light's one direction has density 1 and
 //! cannot be found by a BSDF sample.
 
+use crate::lanes::{F32s, Mask, Vec3s};
 use crate::math::{vec3, Frame, Vec3};
 use crate::scene::shape::triangle_area;
 use std::f32::consts::PI;
@@ -203,23 +204,19 @@ impl Light {
                 let wi = vec3(r * phi.cos(), r * phi.sin(), z);
                 Some(LightSample { wi, distance: f32::INFINITY, radiance: *radiance, pdf: 1.0 / (4.0 * PI) })
             }
-            Light::Mesh { triangles, cdf, area, .. } => {
+            Light::Mesh { triangles, cdf, area, radiance, two_sided, .. } => {
                 // Pick a triangle by area, then reuse u[0] within it.
                 let k = if cdf.len() == 1 { 0 } else { cdf.partition_point(|c| *c <= u[0]).min(cdf.len() - 1) };
                 let lo = if k == 0 { 0.0 } else { cdf[k - 1] };
-                let u0 = ((u[0] - lo) / (cdf[k] - lo)).clamp(0.0, 1.0 - f32::EPSILON);
                 let t = &triangles[k];
-                let s = u0.sqrt();
-                // Barycentrics (1 − √u₀, u₁√u₀, (1 − u₁)√u₀): uniform over the triangle.
-                let (b1, b2) = (u[1] * s, (1.0 - u[1]) * s);
-                let point = t.p0 + t.e1 * b1 + t.e2 * b2;
+                let (point, [b1, b2]) = triangle_point(t.p0, t.e1, t.e2, [remap(u[0], lo, cdf[k]), u[1]]);
                 let n = match t.vertex_normals {
                     Some([n0, n1, n2]) => t.n.face_forward(n0 * (1.0 - b1 - b2) + n1 * b1 + n2 * b2),
                     None => t.n,
                 };
-                self.area_sample(p, point, n, 1.0 / area)
+                area_sample(p, point, n, 1.0 / area, *radiance, *two_sided)
             }
-            Light::Sphere { center, radius, flip, .. } => {
+            Light::Sphere { center, radius, flip, radiance, two_sided, .. } => {
                 // The emitting side's normal: outward, or inward under ReverseOrientation.
                 let oriented = |n: Vec3| if *flip { -n } else { n };
                 let to_center = *center - p;
@@ -232,7 +229,7 @@ impl Light {
                     let phi = 2.0 * PI * u[1];
                     let n = vec3(rr * phi.cos(), rr * phi.sin(), z);
                     let area = 4.0 * PI * r2;
-                    return self.area_sample(p, *center + n * *radius, oriented(n), 1.0 / area);
+                    return area_sample(p, *center + n * *radius, oriented(n), 1.0 / area, *radiance, *two_sided);
                 }
                 // Outside: sample the cone of directions the sphere subtends.
                 let dc = dc2.sqrt();
@@ -288,23 +285,6 @@ impl Light {
         (distance > 0.0 && distance.is_finite()).then(|| (d / distance, distance))
     }
 
-    fn area_sample(&self, p: Vec3, point: Vec3, n: Vec3, pdf_area: f32) -> Option<LightSample> {
-        let d = point - p;
-        let dist2 = d.length_squared();
-        let distance = dist2.sqrt();
-        if !(distance > 0.0) {
-            return None;
-        }
-        let wi = d / distance;
-        let cos = n.dot(wi).abs();
-        if cos == 0.0 {
-            return None;
-        }
-        let pdf = pdf_area * dist2 / cos;
-        let radiance = self.emitted(n, -wi);
-        (pdf.is_finite() && pdf > 0.0).then_some(LightSample { wi, distance, radiance, pdf })
-    }
-
     /// The solid-angle density of [`Light::sample`] from `p` reaching the
     /// light point `point` with normal `n` along `wi`.
     pub fn pdf(&self, p: Vec3, wi: Vec3, point: Vec3, n: Vec3) -> f32 {
@@ -336,6 +316,118 @@ impl Light {
             Light::Point { .. } | Light::Spot { .. } | Light::Distant { .. } => 0.0,
         }
     }
+}
+
+/// `u` ∈ [`lo`, `hi`) stretched back to [0, 1): the part of a random
+/// number left once it chose the interval.
+#[inline(always)]
+pub fn remap(u: f32, lo: f32, hi: f32) -> f32 {
+    ((u - lo) / (hi - lo)).clamp(0.0, 1.0 - f32::EPSILON)
+}
+
+/// The point of the triangle (`p0`, `p0 + e1`, `p0 + e2`) that `u` ∈ [0, 1)²
+/// picks uniformly by area, and its barycentrics (b1, b2).
+#[inline(always)]
+pub fn triangle_point(p0: Vec3, e1: Vec3, e2: Vec3, u: [f32; 2]) -> (Vec3, [f32; 2]) {
+    let s = u[0].sqrt();
+    // Barycentrics (1 − √u₀, u₁√u₀, (1 − u₁)√u₀): uniform over the triangle.
+    let (b1, b2) = (u[1] * s, (1.0 - u[1]) * s);
+    (p0 + e1 * b1 + e2 * b2, [b1, b2])
+}
+
+/// A sample of a diffuse emitter at `point` (normal `n`) seen from `p`,
+/// the point having been chosen with density `pdf_area` by area.
+#[inline(always)]
+pub fn area_sample(
+    p: Vec3,
+    point: Vec3,
+    n: Vec3,
+    pdf_area: f32,
+    radiance: Vec3,
+    two_sided: bool,
+) -> Option<LightSample> {
+    let d = point - p;
+    let dist2 = d.length_squared();
+    let distance = dist2.sqrt();
+    if !(distance > 0.0) {
+        return None;
+    }
+    let wi = d / distance;
+    let cos = n.dot(wi).abs();
+    if cos == 0.0 {
+        return None;
+    }
+    let pdf = pdf_area * dist2 / cos;
+    // As `Light::emitted` towards −wi.
+    let radiance = if two_sided || n.dot(-wi) > 0.0 { radiance } else { Vec3::ZERO };
+    (pdf.is_finite() && pdf > 0.0).then_some(LightSample { wi, distance, radiance, pdf })
+}
+
+/// Light samples in lanes (see [`LightSample`]); `ok` marks the lanes that have one.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LightSamples {
+    /// The lanes with a sample.
+    pub ok: Mask,
+    /// Unit directions to the light.
+    pub wi: Vec3s,
+    /// Distances to the light points.
+    pub distance: F32s,
+    /// Radiance arriving along −wi.
+    pub radiance: Vec3s,
+    /// Densities in solid angle.
+    pub pdf: F32s,
+}
+
+impl LightSamples {
+    /// Lane `k`'s sample, if it has one.
+    pub fn lane(&self, k: usize) -> Option<LightSample> {
+        self.ok.0[k].then(|| LightSample {
+            wi: self.wi.lane(k),
+            distance: self.distance.0[k],
+            radiance: self.radiance.lane(k),
+            pdf: self.pdf.0[k],
+        })
+    }
+
+    /// Sets lane `k`'s sample.
+    pub fn set_lane(&mut self, k: usize, sample: Option<LightSample>) {
+        self.ok.0[k] = sample.is_some();
+        let s = sample.unwrap_or(LightSample { wi: Vec3::ZERO, distance: 0.0, radiance: Vec3::ZERO, pdf: 0.0 });
+        self.wi.set_lane(k, s.wi);
+        self.distance.0[k] = s.distance;
+        self.radiance.set_lane(k, s.radiance);
+        self.pdf.0[k] = s.pdf;
+    }
+}
+
+/// [`triangle_point`] in lanes (the point only).
+#[inline(always)]
+pub fn triangle_point_lanes(p0: Vec3s, e1: Vec3s, e2: Vec3s, u: [F32s; 2]) -> Vec3s {
+    let s = u[0].sqrt();
+    let (b1, b2) = (u[1] * s, (F32s::splat(1.0) - u[1]) * s);
+    p0 + e1 * b1 + e2 * b2
+}
+
+/// [`area_sample`] in lanes.
+#[inline(always)]
+pub fn area_sample_lanes(
+    p: Vec3s,
+    point: Vec3s,
+    n: Vec3s,
+    pdf_area: F32s,
+    radiance: Vec3s,
+    two_sided: Mask,
+) -> LightSamples {
+    let zero = F32s::splat(0.0);
+    let d = point - p;
+    let dist2 = d.length_squared();
+    let distance = dist2.sqrt();
+    let wi = d * (F32s::splat(1.0) / distance);
+    let cos = n.dot(wi).abs();
+    let pdf = pdf_area * dist2 / cos;
+    let radiance = Vec3s::select(two_sided | n.dot(-wi).gt(zero), radiance, Vec3s::ZERO);
+    let ok = distance.gt(zero) & !cos.eq(zero) & pdf.is_finite() & pdf.gt(zero);
+    LightSamples { ok, wi, distance, radiance, pdf }
 }
 
 /// The normalised cumulative areas of a mesh's triangles.

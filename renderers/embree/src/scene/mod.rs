@@ -3,13 +3,14 @@
 
 pub mod camera;
 pub mod environment;
+pub mod flat;
 pub mod light;
 pub mod material;
 pub mod shape;
 pub mod texture;
 
-use crate::embree::{Bvh, EmbreeError, Placement, Query};
-use crate::integrator::Segment;
+use crate::embree::{Bvh, EmbreeError, HitPacket, Placement, RayHit, RayPacket, Valid};
+use crate::lanes::{F32s, Vec3s};
 use crate::math::Vec3;
 use crate::math::{Affine, Transform};
 use camera::{Camera, Ray};
@@ -65,6 +66,8 @@ pub struct Scene {
     instances: Vec<Instance>,
     /// Each object's shapes, a range of `shapes` after the top-level ones.
     objects: Vec<std::ops::Range<u32>>,
+    /// The common cases as flat tables, for the integrator's lanes.
+    pub flat: flat::Flat,
     bvh: Bvh,
 }
 
@@ -179,13 +182,14 @@ impl Scene {
             .map(|p| if total > 0.0 && total.is_finite() { 0.9 * p / total + 0.1 / n } else { 1.0 / n })
             .collect();
         let mut acc = 0.0;
-        let light_cdf = light_pmf
+        let light_cdf: Vec<f32> = light_pmf
             .iter()
             .map(|p| {
                 acc += p;
                 acc
             })
             .collect();
+        let flat = flat::Flat::new(&shapes, top_level, &materials, &bumps, &lights, &light_pmf, &light_cdf);
         Ok(Scene {
             name,
             camera,
@@ -202,8 +206,16 @@ impl Scene {
             extent,
             instances,
             objects,
+            flat,
             bvh,
         })
+    }
+
+    /// The scene with every path shaded by the general code rather than in
+    /// SIMD lanes (the values are the same; for comparisons).
+    pub fn with_general_shading(mut self) -> Scene {
+        self.flat = self.flat.without_plain_cases();
+        self
     }
 
     /// Whether the scene places objects by instancing.
@@ -240,52 +252,56 @@ impl Scene {
         scale * 2e-5 + f32::MIN_POSITIVE
     }
 
-    /// The closest surface along each ray (unbounded), in one batch to Embree.
-    pub fn intersect_all(&self, rays: &[Ray], hits: &mut Vec<Option<SurfaceHit>>) {
-        hits.clear();
-        let query = |ray: &Ray| Query {
-            org: ray.origin.to_array(),
-            dir: ray.dir.to_array(),
-            tnear: 0.0,
-            tfar: f32::INFINITY,
-            time: self.embree_time(ray.time),
-        };
-        self.bvh.intersect_each(rays.iter().map(query), |i, hit| {
-            let ray = &rays[i];
-            hits.push(hit.map(|hit| {
-                let time = self.embree_time(ray.time);
-                match hit.instance {
-                    None => self.shapes[hit.geometry as usize].geometry.surface(
-                        &hit,
-                        ray.origin,
-                        ray.dir,
-                        time,
-                        hit.geometry,
-                    ),
-                    Some(k) => {
-                        // Found in the object's own space: the ray is taken there, the hit brought back.
-                        let instance = &self.instances[k as usize];
-                        let shape = self.objects[instance.object as usize].start + hit.geometry;
-                        let (origin, dir) = (instance.to_object.point(ray.origin), instance.to_object.vector(ray.dir));
-                        let local = self.shapes[shape as usize].geometry.surface(&hit, origin, dir, time, shape);
-                        SurfaceHit { instance: Some(k), ..instance.to_world(local) }
-                    }
-                }
-            }));
-        });
+    /// [`Scene::embree_time`] in lanes.
+    #[inline(always)]
+    pub fn embree_time_lanes(&self, t: F32s) -> F32s {
+        let [a, b] = self.transform_times;
+        if b > a {
+            ((t - F32s::splat(a)) / (b - a)).map(|v| v.clamp(0.0, 1.0))
+        } else {
+            F32s::splat(0.0)
+        }
     }
 
-    /// Whether anything blocks each segment, in one batch to Embree.
-    pub fn occluded_all(&self, segments: &[Segment], occluded: &mut Vec<bool>) {
-        occluded.clear();
-        let query = |s: &Segment| Query {
-            org: s.ray.origin.to_array(),
-            dir: s.ray.dir.to_array(),
-            tnear: 0.0,
-            tfar: s.t_max,
-            time: self.embree_time(s.ray.time),
-        };
-        self.bvh.occluded_each(segments.iter().map(query), |o| occluded.push(o));
+    /// [`Scene::epsilon`] in lanes.
+    #[inline(always)]
+    pub fn epsilon_lanes(&self, p: Vec3s) -> F32s {
+        let scale = p.x.abs().max(p.y.abs()).max(p.z.abs()).max(F32s::splat(self.extent * 1e-3));
+        scale * 2e-5 + F32s::splat(f32::MIN_POSITIVE)
+    }
+
+    /// Finds the closest hit of each valid lane of `packet` (see [`Bvh::intersect`]).
+    #[inline]
+    pub fn intersect(&self, valid: &Valid, packet: &mut HitPacket) {
+        self.bvh.intersect(valid, packet);
+    }
+
+    /// Tests each valid lane of `packet` for a blocker (see [`Bvh::occluded`]).
+    #[inline]
+    pub fn occluded(&self, valid: &Valid, packet: &mut RayPacket) {
+        self.bvh.occluded(valid, packet);
+    }
+
+    /// Lane `k`'s hit in `packet` after [`Scene::intersect`], if any.
+    #[inline]
+    pub fn hit(&self, packet: &HitPacket, k: usize) -> Option<RayHit> {
+        self.bvh.hit(packet, k)
+    }
+
+    /// The surface point of Embree's `hit` of `ray`.
+    pub fn surface(&self, hit: &RayHit, ray: &Ray) -> SurfaceHit {
+        let time = self.embree_time(ray.time);
+        match hit.instance {
+            None => self.shapes[hit.geometry as usize].geometry.surface(hit, ray.origin, ray.dir, time, hit.geometry),
+            Some(k) => {
+                // Found in the object's own space: the ray is taken there, the hit brought back.
+                let instance = &self.instances[k as usize];
+                let shape = self.objects[instance.object as usize].start + hit.geometry;
+                let (origin, dir) = (instance.to_object.point(ray.origin), instance.to_object.vector(ray.dir));
+                let local = self.shapes[shape as usize].geometry.surface(hit, origin, dir, time, shape);
+                SurfaceHit { instance: Some(k), ..instance.to_world(local) }
+            }
+        }
     }
 
     /// ∂p/∂u and ∂p/∂v at a hit (see [`shape::Geometry::tangents`]), in world space.
