@@ -18,6 +18,17 @@ use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 /// Lanes: one Embree packet's rays.
 pub const W: usize = crate::embree::LANES;
 
+/// `[f(0), …, f(W − 1)]`, always inlined (the standard `from_fn` and
+/// `map` are not, and out of line they stop the lanes from vectorising).
+#[inline(always)]
+pub fn each<T: Copy + Default>(mut f: impl FnMut(usize) -> T) -> [T; W] {
+    let mut lanes = [T::default(); W];
+    for (k, lane) in lanes.iter_mut().enumerate() {
+        *lane = f(k);
+    }
+    lanes
+}
+
 /// W floats.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[repr(C, align(64))]
@@ -60,14 +71,14 @@ macro_rules! lanewise {
             type Output = $ty;
             #[inline(always)]
             fn $method(self, o: $ty) -> $ty {
-                $ty(std::array::from_fn(|k| self.0[k] $op o.0[k]))
+                $ty(each(|k| self.0[k] $op o.0[k]))
             }
         }
         impl $trait<$elem> for $ty {
             type Output = $ty;
             #[inline(always)]
             fn $method(self, o: $elem) -> $ty {
-                $ty(std::array::from_fn(|k| self.0[k] $op o))
+                $ty(each(|k| self.0[k] $op o))
             }
         }
     )*};
@@ -93,24 +104,24 @@ impl F32s {
     /// Lane `k` is `f(k)`.
     #[inline(always)]
     pub fn from_fn(f: impl FnMut(usize) -> f32) -> F32s {
-        F32s(std::array::from_fn(f))
+        F32s(each(f))
     }
 
     /// `f` of each lane.
     #[inline(always)]
     pub fn map(self, f: impl Fn(f32) -> f32) -> F32s {
-        F32s(self.0.map(f))
+        F32s(each(|k| f(self.0[k])))
     }
 
     /// `f` of each pair of lanes.
     #[inline(always)]
     pub fn zip(self, o: F32s, f: impl Fn(f32, f32) -> f32) -> F32s {
-        F32s(std::array::from_fn(|k| f(self.0[k], o.0[k])))
+        F32s(each(|k| f(self.0[k], o.0[k])))
     }
 
     #[inline(always)]
     fn test(self, o: F32s, f: impl Fn(f32, f32) -> bool) -> Mask {
-        Mask(std::array::from_fn(|k| f(self.0[k], o.0[k])))
+        Mask(each(|k| f(self.0[k], o.0[k])))
     }
 
     /// Square roots.
@@ -170,19 +181,19 @@ impl F32s {
     /// Infinite lanes.
     #[inline(always)]
     pub fn is_infinite(self) -> Mask {
-        Mask(self.0.map(f32::is_infinite))
+        Mask(each(|k| self.0[k].is_infinite()))
     }
 
     /// Lanes neither infinite nor NaN.
     #[inline(always)]
     pub fn is_finite(self) -> Mask {
-        Mask(self.0.map(f32::is_finite))
+        Mask(each(|k| self.0[k].is_finite()))
     }
 
     /// `a` in the lanes of `m`, `b` in the others.
     #[inline(always)]
     pub fn select(m: Mask, a: F32s, b: F32s) -> F32s {
-        F32s(std::array::from_fn(|k| if m.0[k] { a.0[k] } else { b.0[k] }))
+        F32s(each(|k| if m.0[k] { a.0[k] } else { b.0[k] }))
     }
 }
 
@@ -196,31 +207,31 @@ impl U32s {
     /// Lane `k` is `f(k)`.
     #[inline(always)]
     pub fn from_fn(f: impl FnMut(usize) -> u32) -> U32s {
-        U32s(std::array::from_fn(f))
+        U32s(each(f))
     }
 
     /// Lanes equal to `o`'s.
     #[inline(always)]
     pub fn eq(self, o: U32s) -> Mask {
-        Mask(std::array::from_fn(|k| self.0[k] == o.0[k]))
+        Mask(each(|k| self.0[k] == o.0[k]))
     }
 
     /// The smaller of each pair of lanes.
     #[inline(always)]
     pub fn min(self, o: U32s) -> U32s {
-        U32s(std::array::from_fn(|k| self.0[k].min(o.0[k])))
+        U32s(each(|k| self.0[k].min(o.0[k])))
     }
 
     /// Sums, wrapping.
     #[inline(always)]
     pub fn wrapping_add(self, o: U32s) -> U32s {
-        U32s(std::array::from_fn(|k| self.0[k].wrapping_add(o.0[k])))
+        U32s(each(|k| self.0[k].wrapping_add(o.0[k])))
     }
 
     /// `a` in the lanes of `m`, `b` in the others.
     #[inline(always)]
     pub fn select(m: Mask, a: U32s, b: U32s) -> U32s {
-        U32s(std::array::from_fn(|k| if m.0[k] { a.0[k] } else { b.0[k] }))
+        U32s(each(|k| if m.0[k] { a.0[k] } else { b.0[k] }))
     }
 }
 
@@ -229,6 +240,12 @@ impl Mask {
     #[inline(always)]
     pub fn splat(v: bool) -> Mask {
         Mask([v; W])
+    }
+
+    /// Lane `k` is `f(k)`.
+    #[inline(always)]
+    pub fn from_fn(f: impl FnMut(usize) -> bool) -> Mask {
+        Mask(each(f))
     }
 
     /// Whether any lane is set.
@@ -251,7 +268,7 @@ impl Mask {
     /// 1 in the lanes set, 0 elsewhere.
     #[inline(always)]
     pub fn count(self) -> U32s {
-        U32s(self.0.map(|m| m as u32))
+        U32s(each(|k| self.0[k] as u32))
     }
 }
 
@@ -259,7 +276,7 @@ impl BitAnd for Mask {
     type Output = Mask;
     #[inline(always)]
     fn bitand(self, o: Mask) -> Mask {
-        Mask(std::array::from_fn(|k| self.0[k] & o.0[k]))
+        Mask(each(|k| self.0[k] & o.0[k]))
     }
 }
 
@@ -267,7 +284,7 @@ impl BitAnd<bool> for Mask {
     type Output = Mask;
     #[inline(always)]
     fn bitand(self, o: bool) -> Mask {
-        Mask(self.0.map(|m| m & o))
+        Mask(each(|k| self.0[k] & o))
     }
 }
 
@@ -275,7 +292,7 @@ impl BitOr for Mask {
     type Output = Mask;
     #[inline(always)]
     fn bitor(self, o: Mask) -> Mask {
-        Mask(std::array::from_fn(|k| self.0[k] | o.0[k]))
+        Mask(each(|k| self.0[k] | o.0[k]))
     }
 }
 
@@ -283,7 +300,7 @@ impl BitOr<bool> for Mask {
     type Output = Mask;
     #[inline(always)]
     fn bitor(self, o: bool) -> Mask {
-        Mask(self.0.map(|m| m | o))
+        Mask(each(|k| self.0[k] | o))
     }
 }
 
@@ -291,7 +308,7 @@ impl Not for Mask {
     type Output = Mask;
     #[inline(always)]
     fn not(self) -> Mask {
-        Mask(self.0.map(|m| !m))
+        Mask(each(|k| !self.0[k]))
     }
 }
 
@@ -311,10 +328,11 @@ impl Vec3s {
         Vec3s::new(F32s::splat(v.x), F32s::splat(v.y), F32s::splat(v.z))
     }
 
-    /// Lane `k` is `f(k)`.
+    /// Lane `k` is `f(k)` (called once per component: a gather from a
+    /// table is three gathers, not a table of structures built first).
     #[inline(always)]
-    pub fn from_fn(mut f: impl FnMut(usize) -> Vec3) -> Vec3s {
-        let v: [Vec3; W] = std::array::from_fn(&mut f);
+    pub fn from_fn(f: impl Fn(usize) -> Vec3) -> Vec3s {
+        let v: [Vec3; W] = each(f);
         Vec3s::new(F32s::from_fn(|k| v[k].x), F32s::from_fn(|k| v[k].y), F32s::from_fn(|k| v[k].z))
     }
 
@@ -550,7 +568,7 @@ pub(crate) mod tests {
 
     #[test]
     fn a_mask_lists_its_lanes_in_order() {
-        let m = Mask(std::array::from_fn(|k| k % 3 == 1 || k == 15));
+        let m = Mask(each(|k| k % 3 == 1 || k == 15));
         assert_eq!(m.lanes().collect::<Vec<_>>(), [1, 4, 7, 10, 13, 15]);
         assert_eq!(Mask::splat(false).lanes().count(), 0);
         assert_eq!(Mask::splat(true).lanes().count(), W);

@@ -21,7 +21,7 @@ use super::{
 };
 use crate::bsdf::{diffuse::Diffuse, Bsdf};
 use crate::embree::{HitPacket, RayPacket, Valid, INVALID_ID};
-use crate::lanes::{F32s, Mask, U32s, Vec3s, W};
+use crate::lanes::{each, F32s, Mask, U32s, Vec3s, W};
 use crate::math::{vec3, Frame, Vec3};
 use crate::scene::camera::Ray;
 use crate::scene::flat::{FlatLights, NONE};
@@ -181,7 +181,7 @@ impl Found {
 /// A packet's lane mask from `m`.
 #[inline(always)]
 fn valid(m: Mask) -> Valid {
-    Valid(m.0.map(|m| if m { -1 } else { 0 }))
+    Valid(each(|k| if m.0[k] { -1 } else { 0 }))
 }
 
 /// The instruction sets a batch's loops are compiled for.
@@ -350,7 +350,7 @@ impl Batch {
                 self.found.resize_with(chunks, Found::default);
                 self.bsdfs.resize(chunks * W, Bsdf::Diffuse(Diffuse { reflectance: Vec3::ZERO }));
             }
-            self.trace_rays(scene, chunks);
+            self.trace_rays(scene, chunks, depth);
             self.surfaces(scene, chunks);
             self.emission(scene, chunks, depth);
             self.materials(scene, chunks);
@@ -364,14 +364,15 @@ impl Batch {
             } else {
                 self.paths[..chunks].iter_mut().for_each(|p| p.alive = Mask::splat(false));
             }
-            self.retire();
+            self.retire(chunks);
             depth += 1;
         }
     }
 
-    /// Traces every live path's ray, a packet per chunk.
+    /// Traces every live path's ray, a packet per chunk (the camera rays
+    /// of a chunk are coherent: its paths start in one or two pixels).
     #[inline(always)]
-    fn trace_rays(&mut self, scene: &Scene, chunks: usize) {
+    fn trace_rays(&mut self, scene: &Scene, chunks: usize, depth: u32) {
         for (paths, found) in self.paths[..chunks].iter_mut().zip(&mut self.found) {
             let ray = &mut found.packet.ray;
             [ray.org_x, ray.org_y, ray.org_z] = [paths.org.x.0, paths.org.y.0, paths.org.z.0];
@@ -381,7 +382,7 @@ impl Batch {
             (ray.mask, ray.flags) = ([u32::MAX; W], [0; W]);
             found.live = paths.alive;
             paths.rays = paths.rays.wrapping_add(paths.alive.count());
-            scene.intersect(&valid(paths.alive), &mut found.packet);
+            scene.intersect(&valid(paths.alive), &mut found.packet, depth == 0);
         }
     }
 
@@ -399,12 +400,12 @@ impl Batch {
             found.plain = found.hit & top_level & !first.eq(U32s::splat(NONE));
             // As Geometry::surface computes it.
             let index = first.wrapping_add(U32s(hits.prim_id));
-            let triangles: [_; W] = std::array::from_fn(|k| flat.triangles.at(index.0[k]));
-            let vertex = |i: usize| Vec3s::from_fn(|k| triangles[k].p[i]);
+            let triangle = |k: usize| flat.triangles.at(index.0[k]);
+            let vertex = |i: usize| Vec3s::from_fn(|k| triangle(k).p[i]);
             let (b1, b2) = (F32s(hits.u), F32s(hits.v));
             let b0 = F32s::splat(1.0) - b1 - b2;
             found.p = vertex(0) * b0 + vertex(1) * b1 + vertex(2) * b2;
-            found.ng = Vec3s::from_fn(|k| triangles[k].ng);
+            found.ng = Vec3s::from_fn(|k| triangle(k).ng);
             found.ns = found.ng;
             found.uv = [b1 + b2, b2];
             found.shape = geometry;
@@ -466,9 +467,9 @@ impl Batch {
             // A path that found nothing ends here.
             paths.alive = found.hit;
             found.material = U32s::from_fn(|k| flat.shape_material.at(found.shape.0[k]));
-            let diffuse: [Option<Vec3>; W] = std::array::from_fn(|k| flat.diffuse.at(found.material.0[k]));
-            found.fast = found.hit & Mask(diffuse.map(|d| d.is_some()));
-            found.reflectance = Vec3s::from_fn(|k| diffuse[k].unwrap_or(Vec3::ZERO));
+            let material = found.material;
+            found.fast = found.hit & Mask::from_fn(|k| flat.diffuse.at(material.0[k]));
+            found.reflectance = Vec3s::from_fn(|k| flat.reflectance.at(material.0[k]));
             let general = found.hit & !found.fast;
             for k in general.lanes() {
                 let mut hit = found.surface_hit(k);
@@ -480,12 +481,11 @@ impl Batch {
                     found.ns.set_lane(k, hit.ns);
                 }
                 found.material.0[k] = material;
-                match flat.diffuse.at(material) {
-                    Some(reflectance) => {
-                        found.fast.0[k] = true;
-                        found.reflectance.set_lane(k, reflectance);
-                    }
-                    None => self.bsdfs[c * W + k] = scene.materials[material as usize].bsdf(hit.uv),
+                if flat.diffuse.at(material) {
+                    found.fast.0[k] = true;
+                    found.reflectance.set_lane(k, flat.reflectance.at(material));
+                } else {
+                    self.bsdfs[c * W + k] = scene.materials[material as usize].bsdf(hit.uv);
                 }
             }
         }
@@ -658,7 +658,7 @@ impl Batch {
                 continue;
             }
             scene.occluded(&found.shadow_valid, &mut found.shadow);
-            let clear = Mask(std::array::from_fn(|k| found.shadow_valid.0[k] != 0 && !found.shadow.occluded(k)));
+            let clear = Mask::from_fn(|k| found.shadow_valid.0[k] != 0 && !found.shadow.occluded(k));
             paths.l = Vec3s::select(clear, paths.l + found.pending_color, paths.l);
             paths.diffuse = Vec3s::select(clear, paths.diffuse + found.pending_diffuse, paths.diffuse);
             if depth == 0 && wanted.direct {
@@ -669,20 +669,30 @@ impl Batch {
         }
     }
 
-    /// Writes the values of the paths that ended, and closes up the rest at the front.
-    fn retire(&mut self) {
-        let mut kept = 0;
-        for i in 0..self.live {
-            let (c, k) = (i / W, i % W);
-            let paths = &self.paths[c];
-            if !paths.alive.0[k] {
+    /// Writes the values of the paths that ended this bounce, and closes up
+    /// the rest at the front (keeping ended paths in masked lanes until a
+    /// quarter of the lanes held them was no faster).
+    fn retire(&mut self, chunks: usize) {
+        let mut alive = 0;
+        for (paths, found) in self.paths[..chunks].iter().zip(&self.found) {
+            for k in (found.live & !paths.alive).lanes() {
                 let out = &mut self.out[paths.sample.0[k] as usize];
                 (out.color, out.diffuse, out.rays) = (paths.l.lane(k), paths.diffuse.lane(k), paths.rays.0[k]);
                 self.suspect |= !(out.color.is_finite() && out.diffuse.is_finite());
+            }
+            alive += paths.alive.0.iter().filter(|a| **a).count();
+        }
+        if alive == self.live {
+            return;
+        }
+        let mut kept = 0;
+        for i in 0..self.live {
+            let (c, k) = (i / W, i % W);
+            if !self.paths[c].alive.0[k] {
                 continue;
             }
             if kept != i {
-                let state = paths.get(k);
+                let state = self.paths[c].get(k);
                 self.paths[kept / W].put(kept % W, &state);
             }
             kept += 1;

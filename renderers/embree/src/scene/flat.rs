@@ -6,7 +6,7 @@
 //! by the general code; both give the same values (the same formulas, in
 //! the same order).
 
-use crate::lanes::{F32s, Mask, U32s, Vec3s, W};
+use crate::lanes::{each, F32s, Mask, U32s, Vec3s};
 use crate::math::Vec3;
 use crate::scene::light::{
     area_sample, area_sample_lanes, remap, triangle_point, triangle_point_lanes, Light, LightSample, LightSamples,
@@ -155,7 +155,7 @@ impl FlatLights {
             plain: Mask::splat(light.plain),
             first: U32s::splat(light.first),
             count: U32s::splat(light.count),
-            cdf: light.cdf.map(F32s::splat),
+            cdf: each(|j| F32s::splat(light.cdf[j])),
             inv_area: F32s::splat(light.inv_area),
             radiance: Vec3s::splat(light.radiance),
             two_sided: Mask::splat(light.two_sided),
@@ -165,15 +165,15 @@ impl FlatLights {
     /// Light `lights[i]` in the lane of each `i`.
     #[inline(always)]
     pub fn gather(lights: &Table<FlatLight>, i: U32s) -> FlatLights {
-        let each: [FlatLight; W] = std::array::from_fn(|k| lights.at(i.0[k]));
+        let light = |k: usize| lights.at(i.0[k]);
         FlatLights {
-            plain: Mask(each.map(|l| l.plain)),
-            first: U32s(each.map(|l| l.first)),
-            count: U32s(each.map(|l| l.count)),
-            cdf: std::array::from_fn(|j| F32s(each.map(|l| l.cdf[j]))),
-            inv_area: F32s(each.map(|l| l.inv_area)),
-            radiance: Vec3s::from_fn(|k| each[k].radiance),
-            two_sided: Mask(each.map(|l| l.two_sided)),
+            plain: Mask::from_fn(|k| light(k).plain),
+            first: U32s::from_fn(|k| light(k).first),
+            count: U32s::from_fn(|k| light(k).count),
+            cdf: each(|j| F32s::from_fn(|k| light(k).cdf[j])),
+            inv_area: F32s::from_fn(|k| light(k).inv_area),
+            radiance: Vec3s::from_fn(|k| light(k).radiance),
+            two_sided: Mask::from_fn(|k| light(k).two_sided),
         }
     }
 
@@ -191,8 +191,7 @@ impl FlatLights {
         }
         let u0 = F32s::from_fn(|l| remap(u[0].0[l], lo.0[l], hi.0[l]));
         let index = self.first.wrapping_add(k);
-        let t: [LightTriangle; W] = std::array::from_fn(|l| triangles.at(index.0[l]));
-        let corner = |f: fn(&LightTriangle) -> Vec3| Vec3s::from_fn(|l| f(&t[l]));
+        let corner = |f: fn(&LightTriangle) -> Vec3| Vec3s::from_fn(|l| f(&triangles.at(index.0[l])));
         let point = triangle_point_lanes(corner(|t| t.p0), corner(|t| t.e1), corner(|t| t.e2), [u0, u[1]]);
         area_sample_lanes(p, point, corner(|t| t.n), self.inv_area, self.radiance, self.two_sided)
     }
@@ -224,9 +223,12 @@ pub struct Flat {
     pub shape_material: Table<u32>,
     /// Per shape: its light, or [`NONE`].
     pub shape_light: Table<u32>,
-    /// Per material: its reflectance when it is a constant diffuse material
-    /// without a bump map (clamped as [`Material::bsdf`] clamps it), else `None`.
-    pub diffuse: Table<Option<Vec3>>,
+    /// Per material: whether it is a constant diffuse material without a
+    /// bump map, and if so its reflectance (clamped as [`Material::bsdf`]
+    /// clamps it).
+    pub diffuse: Table<bool>,
+    /// See `diffuse`.
+    pub reflectance: Table<Vec3>,
     /// The lights' cumulative selection probabilities, padded with ∞, when
     /// there are at most [`SMALL`] lights.
     pub light_cdf: Option<[f32; SMALL]>,
@@ -262,7 +264,7 @@ impl Flat {
                 _ => NONE,
             })
             .collect();
-        let diffuse = materials
+        let diffuse: Vec<Option<Vec3>> = materials
             .iter()
             .zip(bumps)
             .map(|(m, bump)| match (m, bump) {
@@ -308,7 +310,8 @@ impl Flat {
             triangles: Table::new(triangles, PlainTriangle::default()),
             shape_material: Table::new(shapes.iter().map(|s| s.material).collect(), 0),
             shape_light: Table::new(shapes.iter().map(|s| s.light.unwrap_or(NONE)).collect(), NONE),
-            diffuse: Table::new(diffuse, None),
+            reflectance: Table::new(diffuse.iter().map(|d| d.unwrap_or(Vec3::ZERO)).collect(), Vec3::ZERO),
+            diffuse: Table::new(diffuse.iter().map(Option::is_some).collect(), false),
             light_cdf: (light_cdf.len() <= SMALL).then(|| padded(light_cdf)),
             light_pmf: Table::new(light_pmf.to_vec(), 0.0),
             lights: Table::new(flat_lights, FlatLight::OTHER),
@@ -322,7 +325,7 @@ impl Flat {
     pub fn without_plain_cases(self) -> Flat {
         Flat {
             first_triangle: Table::new(vec![], NONE),
-            diffuse: Table::new(vec![], None),
+            diffuse: Table::new(vec![], false),
             lights: Table::new(vec![], FlatLight::OTHER),
             ..self
         }
@@ -354,6 +357,7 @@ fn plain_triangles(geometry: &Geometry) -> Option<Vec<PlainTriangle>> {
 mod tests {
     use super::*;
     use crate::lanes::tests::{same, same3, Values};
+    use crate::lanes::W;
     use crate::scene::light::{area_cdf, LightTriangle as MeshTriangle};
 
     /// A mesh light of `n` triangles of different areas, as the scene has it and as the tables do.

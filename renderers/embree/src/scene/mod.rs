@@ -270,10 +270,10 @@ impl Scene {
         scale * 2e-5 + F32s::splat(f32::MIN_POSITIVE)
     }
 
-    /// Finds the closest hit of each valid lane of `packet` (see [`Bvh::intersect`]).
+    /// Finds the closest hit of each valid lane of `packet`, `coherent` rays or not (see [`Bvh::intersect`]).
     #[inline]
-    pub fn intersect(&self, valid: &Valid, packet: &mut HitPacket) {
-        self.bvh.intersect(valid, packet);
+    pub fn intersect(&self, valid: &Valid, packet: &mut HitPacket, coherent: bool) {
+        self.bvh.intersect(valid, packet, coherent);
     }
 
     /// Tests each valid lane of `packet` for a blocker (see [`Bvh::occluded`]).
