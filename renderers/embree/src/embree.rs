@@ -250,9 +250,14 @@ impl Bvh {
         placements: &[Placement],
     ) -> Result<Bvh, EmbreeError> {
         let robust = std::env::var_os("FBKSD_EMBREE_ROBUST").is_some();
+        // Embree's kernels for another instruction set than the CPU's best, when asked (see [`crate::lanes::Isa`]).
+        let config = std::ffi::CString::new(
+            crate::lanes::Isa::from_env().map_or(String::new(), |isa| format!("isa={}", isa.embree_name())),
+        )
+        .expect("no NUL in an ISA name");
         // SAFETY: plain constructor calls; every handle is checked and owned below.
         unsafe {
-            let device = sys::rtcNewDevice(std::ptr::null());
+            let device = sys::rtcNewDevice(config.as_ptr());
             let device = NonNull::new(device).ok_or(EmbreeError { code: 1, call: "rtcNewDevice" })?;
             let new_scene = || {
                 let scene = NonNull::new(sys::rtcNewScene(device.as_ptr()))
@@ -358,6 +363,7 @@ impl Bvh {
     /// shadow rays are not, even at the first bounce). Read the answers
     /// with [`Bvh::hit`].
     pub fn intersect(&self, valid: &Valid, packet: &mut HitPacket, coherent: bool) {
+        packet.ray.clear_masked(valid);
         packet.hit.geom_id = [sys::INVALID_ID; LANES];
         packet.hit.inst_id = [[sys::INVALID_ID; LANES]];
         let mut context = Self::context();
@@ -371,6 +377,7 @@ impl Bvh {
     /// Tests each valid lane of `packet` for anything between `tnear` and
     /// `tfar` (Embree's `rtcOccluded16`); see [`RayPacket::occluded`].
     pub fn occluded(&self, valid: &Valid, packet: &mut RayPacket) {
+        packet.clear_masked(valid);
         let mut context = Self::context();
         // SAFETY: as in intersect.
         unsafe { sys::rtcOccluded16(valid.0.as_ptr(), self.scene.as_ptr(), &mut context, packet) };
@@ -412,6 +419,30 @@ impl RayPacket {
         self.time[k] = time;
         self.mask[k] = u32::MAX;
         self.flags[k] = 0;
+    }
+
+    /// Sets the lanes `valid` masks off to an empty segment: Embree's AVX2
+    /// kernels check every lane of a packet for a well-formed ray, and abort
+    /// on one masked off that holds a NaN.
+    fn clear_masked(&mut self, valid: &Valid) {
+        let keep = |v: &mut [f32; LANES]| {
+            for (v, valid) in v.iter_mut().zip(valid.0) {
+                *v = if valid != 0 { *v } else { 0.0 };
+            }
+        };
+        for field in [
+            &mut self.org_x,
+            &mut self.org_y,
+            &mut self.org_z,
+            &mut self.dir_x,
+            &mut self.dir_y,
+            &mut self.dir_z,
+            &mut self.tnear,
+            &mut self.tfar,
+            &mut self.time,
+        ] {
+            keep(field);
+        }
     }
 
     /// Whether [`Bvh::occluded`] found lane `k` blocked (Embree sets its `tfar` to −∞).

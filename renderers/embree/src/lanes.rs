@@ -1,7 +1,8 @@
 //! Values in lanes: [`W`] of a kind processed together, one per path of a
 //! chunk, for the integrator's SIMD passes: floats ([`F32s`]), integers
 //! ([`U32s`]), masks ([`Mask`]), vectors ([`Vec3s`]) and shading frames
-//! ([`Frames`]).
+//! ([`Frames`]); and the instruction sets the passes are compiled for
+//! ([`Isa`]).
 //!
 //! Each operation is written lane by lane on a fixed-size array, with no
 //! branch; inlined into a function compiled for AVX-512 or AVX2, the
@@ -27,6 +28,83 @@ pub fn each<T: Copy + Default>(mut f: impl FnMut(usize) -> T) -> [T; W] {
         *lane = f(k);
     }
     lanes
+}
+
+/// The instruction sets the integrator's lanes are compiled for (each
+/// gives the same values), and that Embree's kernels can be asked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Isa {
+    /// AVX-512 (F, DQ, VL, BW): a chunk in one register per field, and the
+    /// dimension hashes' 64-bit multiplies in one instruction.
+    Avx512,
+    /// AVX2 (with FMA enabled; nothing is fused, so the values are the same).
+    Avx2,
+    /// What every CPU of the architecture has.
+    Baseline,
+}
+
+impl Isa {
+    /// The instruction sets this CPU has, best first.
+    pub fn available() -> Vec<Isa> {
+        [Isa::Avx512, Isa::Avx2, Isa::Baseline].into_iter().filter(|isa| isa.supported()).collect()
+    }
+
+    /// Whether this CPU has the instruction set.
+    pub fn supported(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::is_x86_feature_detected as has;
+            match self {
+                Isa::Avx512 => has!("avx512f") && has!("avx512dq") && has!("avx512vl") && has!("avx512bw"),
+                Isa::Avx2 => has!("avx2") && has!("fma"),
+                Isa::Baseline => true,
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self == Isa::Baseline
+        }
+    }
+
+    /// The best instruction set this CPU has, or the one `FBKSD_EMBREE_ISA`
+    /// names (see [`Isa::from_env`]).
+    pub fn best() -> Isa {
+        static BEST: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
+        *BEST.get_or_init(|| match Isa::from_env() {
+            Some(isa) if isa.supported() => isa,
+            Some(isa) => {
+                eprintln!("fbksd-embree: this CPU lacks {isa:?} (FBKSD_EMBREE_ISA); using its best");
+                Isa::available()[0]
+            }
+            None => Isa::available()[0],
+        })
+    }
+
+    /// The instruction set `FBKSD_EMBREE_ISA` names (`avx512`, `avx2` or
+    /// `baseline`), if it is set: the lanes and Embree's kernels are then
+    /// those instead of the CPU's best, for tests and comparisons. Another
+    /// name is reported and ignored.
+    pub fn from_env() -> Option<Isa> {
+        let name = std::env::var("FBKSD_EMBREE_ISA").ok()?;
+        match name.as_str() {
+            "avx512" => Some(Isa::Avx512),
+            "avx2" => Some(Isa::Avx2),
+            "baseline" => Some(Isa::Baseline),
+            _ => {
+                eprintln!("fbksd-embree: FBKSD_EMBREE_ISA={name:?} is none of avx512, avx2, baseline; ignored");
+                None
+            }
+        }
+    }
+
+    /// Embree's name of the instruction set (its device option `isa`).
+    pub fn embree_name(self) -> &'static str {
+        match self {
+            Isa::Avx512 => "avx512",
+            Isa::Avx2 => "avx2",
+            Isa::Baseline => "sse2",
+        }
+    }
 }
 
 /// W floats.

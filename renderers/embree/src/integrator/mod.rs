@@ -37,7 +37,8 @@ use crate::scene::Scene;
 use fbksd_renderer::sampler::Dimensions;
 
 pub mod wavefront;
-pub use wavefront::{Batch, Isa};
+pub use crate::lanes::Isa;
+pub use wavefront::Batch;
 
 /// Which features to compute.
 #[derive(Debug, Clone, Copy, Default)]

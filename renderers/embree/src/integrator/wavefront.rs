@@ -21,7 +21,7 @@ use super::{
 };
 use crate::bsdf::{diffuse::Diffuse, Bsdf};
 use crate::embree::{HitPacket, RayPacket, Valid, INVALID_ID};
-use crate::lanes::{each, F32s, Mask, U32s, Vec3s, W};
+use crate::lanes::{each, F32s, Isa, Mask, U32s, Vec3s, W};
 use crate::math::{vec3, Frame, Vec3};
 use crate::scene::camera::Ray;
 use crate::scene::flat::{FlatLights, NONE};
@@ -184,76 +184,34 @@ fn valid(m: Mask) -> Valid {
     Valid(each(|k| if m.0[k] { -1 } else { 0 }))
 }
 
-/// The instruction sets a batch's loops are compiled for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Isa {
-    /// AVX-512 (F, DQ, VL, BW): a chunk in one register per field, and the
-    /// dimension hashes' 64-bit multiplies in one instruction.
-    Avx512,
-    /// AVX2 (with FMA enabled; nothing is fused, so the values are the same).
-    Avx2,
-    /// What every CPU of the architecture has.
-    Baseline,
-}
-
-impl Isa {
-    /// The instruction sets this CPU has, best first.
-    pub fn available() -> Vec<Isa> {
-        [Isa::Avx512, Isa::Avx2, Isa::Baseline].into_iter().filter(|isa| isa.supported()).collect()
-    }
-
-    /// Whether this CPU has the instruction set.
-    pub fn supported(self) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::is_x86_feature_detected as has;
-            match self {
-                Isa::Avx512 => has!("avx512f") && has!("avx512dq") && has!("avx512vl") && has!("avx512bw"),
-                Isa::Avx2 => has!("avx2") && has!("fma"),
-                Isa::Baseline => true,
+/// Runs the batch's bounces compiled for `isa`.
+fn run(isa: Isa, batch: &mut Batch, scene: &Scene, wanted: &Wanted) {
+    /// [`Batch::bounces`] compiled for `$features`.
+    #[cfg(target_arch = "x86_64")]
+    macro_rules! compiled_for {
+        ($name:ident, $features:literal) => {
+            /// # Safety
+            /// The CPU must support the features.
+            #[target_feature(enable = $features)]
+            unsafe fn $name(batch: &mut Batch, scene: &Scene, wanted: &Wanted) {
+                batch.bounces(scene, wanted)
             }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            self == Isa::Baseline
+        };
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        compiled_for!(avx512, "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma");
+        compiled_for!(avx2, "avx2,fma");
+        assert!(isa.supported(), "this CPU lacks {isa:?}");
+        match isa {
+            // SAFETY: the CPU has the features (checked above).
+            Isa::Avx512 => return unsafe { avx512(batch, scene, wanted) },
+            // SAFETY: as above.
+            Isa::Avx2 => return unsafe { avx2(batch, scene, wanted) },
+            Isa::Baseline => {}
         }
     }
-
-    /// The best instruction set this CPU has.
-    pub fn best() -> Isa {
-        static BEST: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
-        *BEST.get_or_init(|| Isa::available()[0])
-    }
-
-    /// Runs the batch's bounces compiled for this instruction set.
-    fn run(self, batch: &mut Batch, scene: &Scene, wanted: &Wanted) {
-        /// [`Batch::bounces`] compiled for `$features`.
-        #[cfg(target_arch = "x86_64")]
-        macro_rules! compiled_for {
-            ($name:ident, $features:literal) => {
-                /// # Safety
-                /// The CPU must support the features.
-                #[target_feature(enable = $features)]
-                unsafe fn $name(batch: &mut Batch, scene: &Scene, wanted: &Wanted) {
-                    batch.bounces(scene, wanted)
-                }
-            };
-        }
-        #[cfg(target_arch = "x86_64")]
-        {
-            compiled_for!(avx512, "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma");
-            compiled_for!(avx2, "avx2,fma");
-            assert!(self.supported(), "this CPU lacks {self:?}");
-            match self {
-                // SAFETY: the CPU has the features (checked above).
-                Isa::Avx512 => return unsafe { avx512(batch, scene, wanted) },
-                // SAFETY: as above.
-                Isa::Avx2 => return unsafe { avx2(batch, scene, wanted) },
-                Isa::Baseline => {}
-            }
-        }
-        batch.bounces(scene, wanted)
-    }
+    batch.bounces(scene, wanted)
 }
 
 /// Traces camera paths in batches (see the module documentation). Holds its
@@ -299,7 +257,7 @@ impl Batch {
         // Features and DIRECT_LIGHT are written as they are found; colours
         // are checked as each path ends.
         self.suspect = wanted.geometry || wanted.direct;
-        isa.run(self, scene, wanted);
+        run(isa, self, scene, wanted);
         if self.suspect {
             self.out.iter_mut().for_each(SampleValues::repair_non_finite);
         }
@@ -398,18 +356,24 @@ impl Batch {
             let first = U32s::from_fn(|k| flat.first_triangle.at(geometry.0[k]));
             let top_level = U32s(hits.inst_id[0]).eq(U32s::splat(INVALID_ID));
             found.plain = found.hit & top_level & !first.eq(U32s::splat(NONE));
-            // As Geometry::surface computes it.
-            let index = first.wrapping_add(U32s(hits.prim_id));
-            let triangle = |k: usize| flat.triangles.at(index.0[k]);
-            let vertex = |i: usize| Vec3s::from_fn(|k| triangle(k).p[i]);
-            let (b1, b2) = (F32s(hits.u), F32s(hits.v));
-            let b0 = F32s::splat(1.0) - b1 - b2;
-            found.p = vertex(0) * b0 + vertex(1) * b1 + vertex(2) * b2;
-            found.ng = Vec3s::from_fn(|k| triangle(k).ng);
-            found.ns = found.ng;
-            found.uv = [b1 + b2, b2];
             found.shape = geometry;
             found.instance = U32s::splat(NONE);
+            if found.plain.any() {
+                // As Geometry::surface computes it.
+                let index = first.wrapping_add(U32s(hits.prim_id));
+                let triangle = |k: usize| flat.triangles.at(index.0[k]);
+                let (b1, b2) = (F32s(hits.u), F32s(hits.v));
+                let b0 = F32s::splat(1.0) - b1 - b2;
+                let (p0, p1, p2) = (
+                    Vec3s::from_fn(|k| triangle(k).p[0]),
+                    Vec3s::from_fn(|k| triangle(k).p[1]),
+                    Vec3s::from_fn(|k| triangle(k).p[2]),
+                );
+                found.p = p0 * b0 + p1 * b1 + p2 * b2;
+                found.ng = Vec3s::from_fn(|k| triangle(k).ng);
+                found.ns = found.ng;
+                found.uv = [b1 + b2, b2];
+            }
             let hit_light = U32s::from_fn(|k| flat.shape_light.at(geometry.0[k]));
             found.emitter =
                 U32s::select(found.hit, hit_light, U32s::select(found.live, environment, U32s::splat(NONE)));
@@ -533,9 +497,10 @@ impl Batch {
             };
             let u_choose = dimension(&paths.key, base);
             // Constant diffuse hits choose a light, and sample a plain one, in lanes ...
+            let fast = found.fast & want_nee;
             let mut sampled = Mask::splat(false);
             found.light.ok = Mask::splat(false);
-            if want_nee && !scene.lights.is_empty() {
+            if fast.any() && !scene.lights.is_empty() {
                 found.delta_light = Mask::splat(false);
                 if scene.lights.len() == 1 {
                     let light = flat.lights.at(0);
@@ -555,7 +520,7 @@ impl Batch {
                 }
             }
             // ... and sample any other light one by one.
-            let unsampled = found.fast & !sampled & want_nee;
+            let unsampled = fast & !sampled;
             for k in unsampled.lanes() {
                 let chosen = scene.choose_light(u_choose.0[k]).map(|(li, pdf)| (&scene.lights[li as usize], pdf));
                 let u = [light_u[0].0[k], light_u[1].0[k]];
@@ -564,32 +529,43 @@ impl Batch {
                 found.delta_light.0[k] = chosen.is_some_and(|(light, _)| light.is_delta());
             }
             // Their contributions, in lanes.
-            let at = found.at_lanes(paths);
-            let (worth, origin, t_max, lc) = diffuse_lanes::light_contribution(
-                scene,
-                &at,
-                found.reflectance,
-                found.choose_pdf,
-                found.delta_light,
-                &found.light,
-                want_incident,
-            );
-            let shadow = worth & found.fast & want_nee;
-            let (color, diffuse, direct) =
-                diffuse_lanes::unoccluded(wanted, depth, &at, found.reflectance, paths.beta, paths.diffuse_share, &lc);
-            paths.rays = paths.rays.wrapping_add(shadow.count());
-            let ray = &mut found.shadow;
-            [ray.org_x, ray.org_y, ray.org_z] = [origin.x.0, origin.y.0, origin.z.0];
-            [ray.dir_x, ray.dir_y, ray.dir_z] = [found.light.wi.x.0, found.light.wi.y.0, found.light.wi.z.0];
-            (ray.tnear, ray.tfar) = ([0.0; W], t_max.0);
-            ray.time = scene.embree_time_lanes(paths.time).0;
-            (ray.mask, ray.flags) = ([u32::MAX; W], [0; W]);
-            // A segment of no length is blocked by the surface it leaves.
-            found.shadow_valid = valid(shadow & t_max.gt(F32s::splat(0.0)));
-            found.pending_color = Vec3s::select(shadow, color, Vec3s::ZERO);
-            found.pending_diffuse = Vec3s::select(shadow, diffuse, Vec3s::ZERO);
-            found.pending_direct = Vec3s::select(shadow, direct, Vec3s::ZERO);
-            found.has_direct = shadow & want_incident;
+            if fast.any() {
+                let at = found.at_lanes(paths);
+                let (worth, origin, t_max, lc) = diffuse_lanes::light_contribution(
+                    scene,
+                    &at,
+                    found.reflectance,
+                    found.choose_pdf,
+                    found.delta_light,
+                    &found.light,
+                    want_incident,
+                );
+                let shadow = worth & fast;
+                let (color, diffuse, direct) = diffuse_lanes::unoccluded(
+                    wanted,
+                    depth,
+                    &at,
+                    found.reflectance,
+                    paths.beta,
+                    paths.diffuse_share,
+                    &lc,
+                );
+                paths.rays = paths.rays.wrapping_add(shadow.count());
+                let ray = &mut found.shadow;
+                [ray.org_x, ray.org_y, ray.org_z] = [origin.x.0, origin.y.0, origin.z.0];
+                [ray.dir_x, ray.dir_y, ray.dir_z] = [found.light.wi.x.0, found.light.wi.y.0, found.light.wi.z.0];
+                (ray.tnear, ray.tfar) = ([0.0; W], t_max.0);
+                ray.time = scene.embree_time_lanes(paths.time).0;
+                (ray.mask, ray.flags) = ([u32::MAX; W], [0; W]);
+                // A segment of no length is blocked by the surface it leaves.
+                found.shadow_valid = valid(shadow & t_max.gt(F32s::splat(0.0)));
+                found.pending_color = Vec3s::select(shadow, color, Vec3s::ZERO);
+                found.pending_diffuse = Vec3s::select(shadow, diffuse, Vec3s::ZERO);
+                found.pending_direct = Vec3s::select(shadow, direct, Vec3s::ZERO);
+                found.has_direct = shadow & want_incident;
+            } else {
+                found.shadow_valid = Valid::default();
+            }
             // The other hits, one by one.
             let general = found.hit & !found.fast;
             for k in general.lanes() {
@@ -620,26 +596,30 @@ impl Batch {
     #[inline(always)]
     fn scatter(&mut self, scene: &Scene, wanted: &Wanted, depth: u32, chunks: usize) {
         for (c, (paths, found)) in self.paths[..chunks].iter_mut().zip(&self.found).enumerate() {
-            let at = found.at_lanes(paths);
-            let throughput = Throughput {
-                keys: &paths.key,
-                beta: paths.beta,
-                eta_scale: paths.eta_scale,
-                diffuse_share: paths.diffuse_share,
-                found_non_specular: paths.found_non_specular,
-            };
-            let s = diffuse_lanes::scatter(scene, wanted, depth, &at, found.reflectance, &throughput);
-            let moved = s.moved & found.fast;
-            paths.beta = Vec3s::select(moved, s.beta, paths.beta);
-            paths.diffuse_share = Vec3s::select(moved, s.diffuse_share, paths.diffuse_share);
-            paths.org = Vec3s::select(moved, s.origin, paths.org);
-            paths.dir = Vec3s::select(moved, s.dir, paths.dir);
-            paths.prev_p = Vec3s::select(moved, found.p, paths.prev_p);
-            paths.prev_pdf = F32s::select(moved, s.pdf, paths.prev_pdf);
-            paths.has_prev = paths.has_prev | moved;
-            paths.specular_bounce = paths.specular_bounce & !moved;
-            // The other lanes' paths end here unless the general code continues them below.
-            paths.alive = s.alive & found.fast;
+            if found.fast.any() {
+                let at = found.at_lanes(paths);
+                let throughput = Throughput {
+                    keys: &paths.key,
+                    beta: paths.beta,
+                    eta_scale: paths.eta_scale,
+                    diffuse_share: paths.diffuse_share,
+                    found_non_specular: paths.found_non_specular,
+                };
+                let s = diffuse_lanes::scatter(scene, wanted, depth, &at, found.reflectance, &throughput);
+                let moved = s.moved & found.fast;
+                paths.beta = Vec3s::select(moved, s.beta, paths.beta);
+                paths.diffuse_share = Vec3s::select(moved, s.diffuse_share, paths.diffuse_share);
+                paths.org = Vec3s::select(moved, s.origin, paths.org);
+                paths.dir = Vec3s::select(moved, s.dir, paths.dir);
+                paths.prev_p = Vec3s::select(moved, found.p, paths.prev_p);
+                paths.prev_pdf = F32s::select(moved, s.pdf, paths.prev_pdf);
+                paths.has_prev = paths.has_prev | moved;
+                paths.specular_bounce = paths.specular_bounce & !moved;
+                // The other lanes' paths end here unless the general code continues them below.
+                paths.alive = s.alive & found.fast;
+            } else {
+                paths.alive = Mask::splat(false);
+            }
             let general = found.hit & !found.fast;
             for k in general.lanes() {
                 let mut state = paths.get(k);
@@ -682,7 +662,7 @@ impl Batch {
             }
             alive += paths.alive.0.iter().filter(|a| **a).count();
         }
-        if alive == self.live {
+        if alive * 4 > self.live * 3 {
             return;
         }
         let mut kept = 0;
