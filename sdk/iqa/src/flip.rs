@@ -395,34 +395,66 @@ fn ring_rows(k: &Kernels) -> usize {
     2 * k.radii().0.max(k.radii().1) + 1
 }
 
-/// Whether the passes may run their AVX2 and FMA builds (the values are the
-/// same: Rust never fuses a multiply and an add on its own).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma");
-    #[allow(unreachable_code)]
-    false
+/// The best build of the passes this CPU can run: AVX-512 (16 lanes),
+/// AVX2 and FMA, or the baseline. The values are the same in each: Rust
+/// never fuses a multiply and an add on its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Build {
+    Avx512,
+    Avx2,
+    Baseline,
 }
 
-/// [`band_pass`] and [`compare_row`] compiled for AVX2 and FMA.
+impl Build {
+    /// Whether this CPU can run the build.
+    fn supported(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::is_x86_feature_detected as has;
+            match self {
+                Build::Avx512 => has!("avx512f") && has!("avx512vl") && has!("avx2") && has!("fma"),
+                Build::Avx2 => has!("avx2") && has!("fma"),
+                Build::Baseline => true,
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self == Build::Baseline
+        }
+    }
+}
+
+fn best_build() -> Build {
+    [Build::Avx512, Build::Avx2].into_iter().find(|b| b.supported()).unwrap_or(Build::Baseline)
+}
+
+/// [`band_pass`] and [`compare_row`] compiled for `$features`.
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use super::*;
+macro_rules! compiled_for {
+    ($module:ident, $features:literal) => {
+        mod $module {
+            use super::*;
 
-    /// # Safety
-    /// The CPU must support AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn band_pass(b: &Bands<'_>, y0: usize, s: &mut BandScratch, out: &mut [f32]) {
-        super::band_pass(b, y0, s, out)
-    }
+            /// # Safety
+            /// The CPU must support the features.
+            #[target_feature(enable = $features)]
+            pub(super) unsafe fn band_pass(b: &Bands<'_>, y0: usize, s: &mut BandScratch, out: &mut [f32]) {
+                super::band_pass(b, y0, s, out)
+            }
 
-    /// # Safety
-    /// The CPU must support AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn compare_row(r: &[f32], t: &[f32], out: &mut [f32]) {
-        super::compare_row(r, t, out)
-    }
+            /// # Safety
+            /// The CPU must support the features.
+            #[target_feature(enable = $features)]
+            pub(super) unsafe fn compare_row(r: &[f32], t: &[f32], out: &mut [f32]) {
+                super::compare_row(r, t, out)
+            }
+        }
+    };
 }
+#[cfg(target_arch = "x86_64")]
+compiled_for!(avx2, "avx2,fma");
+#[cfg(target_arch = "x86_64")]
+compiled_for!(avx512, "avx512f,avx512vl,avx2,fma");
 
 /// How one image is prepared, band by band, at the best instruction set.
 struct Bands<'a> {
@@ -431,7 +463,7 @@ struct Bands<'a> {
     h: usize,
     exposure: Exposure,
     kernels: &'a Kernels,
-    fast: bool,
+    build: Build,
     /// Output rows per band: four bands per thread, enough to spread the work.
     rows: usize,
 }
@@ -439,7 +471,7 @@ struct Bands<'a> {
 impl<'a> Bands<'a> {
     fn new(rgb: &'a [f32], w: usize, h: usize, exposure: Exposure, kernels: &'a Kernels) -> Bands<'a> {
         let rows = h.div_ceil(4 * rayon::current_num_threads()).max(128).min(h.max(1));
-        Bands { rgb, w, h, exposure, kernels, fast: has_avx2(), rows }
+        Bands { rgb, w, h, exposure, kernels, build: best_build(), rows }
     }
 
     fn scratch(&self) -> BandScratch {
@@ -449,18 +481,24 @@ impl<'a> Bands<'a> {
     /// Prepares band `b` into `out`.
     fn run(&self, b: usize, s: &mut BandScratch, out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
-        if self.fast {
-            // SAFETY: has_avx2 detected the features.
-            return unsafe { avx2::band_pass(self, b * self.rows, s, out) };
+        match self.build {
+            // SAFETY: best_build detected the features.
+            Build::Avx512 => return unsafe { avx512::band_pass(self, b * self.rows, s, out) },
+            // SAFETY: as above.
+            Build::Avx2 => return unsafe { avx2::band_pass(self, b * self.rows, s, out) },
+            Build::Baseline => {}
         }
         band_pass(self, b * self.rows, s, out)
     }
 
     fn compare(&self, r: &[f32], t: &[f32], out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
-        if self.fast {
-            // SAFETY: has_avx2 detected the features.
-            return unsafe { avx2::compare_row(r, t, out) };
+        match self.build {
+            // SAFETY: best_build detected the features.
+            Build::Avx512 => return unsafe { avx512::compare_row(r, t, out) },
+            // SAFETY: as above.
+            Build::Avx2 => return unsafe { avx2::compare_row(r, t, out) },
+            Build::Baseline => {}
         }
         compare_row(r, t, out)
     }
@@ -611,6 +649,32 @@ pub fn flip_hdr_map(reference: &[f32], test: &[f32], w: usize, h: usize, ppd: f3
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_build_of_the_passes_gives_the_same_bits() {
+        let (w, h) = (67, 41);
+        let image = |seed: u32| -> Vec<f32> {
+            (0..w * h * 3)
+                .map(|i| ((i as u32).wrapping_mul(2_654_435_761) ^ seed) as f32 / u32::MAX as f32 * 3.0)
+                .collect()
+        };
+        let (reference, test) = (image(1), image(2));
+        let kernels = Kernels::new(default_ppd());
+        let maps: Vec<(Build, Vec<u32>, Vec<u32>)> = [Build::Baseline, Build::Avx2, Build::Avx512]
+            .into_iter()
+            .filter(|b| b.supported())
+            .map(|build| {
+                let e = Exposure::Hdr(0.5);
+                let prepared = Bands { build, ..Bands::new(&reference, w, h, e, &kernels) }.prepare();
+                let mut map = vec![0f32; w * h];
+                Bands { build, ..Bands::new(&test, w, h, e, &kernels) }.compare_into(&prepared, &mut map);
+                (build, prepared.rows.iter().map(|v| v.to_bits()).collect(), map.iter().map(|v| v.to_bits()).collect())
+            })
+            .collect();
+        for (build, prepared, map) in &maps[1..] {
+            assert!(prepared == &maps[0].1 && map == &maps[0].2, "{build:?} differs from the baseline");
+        }
+    }
 
     #[test]
     fn default_ppd_is_the_reference_value() {
