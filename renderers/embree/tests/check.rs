@@ -68,9 +68,11 @@ fn check_piped_into_a_reader_that_stops_ends_quietly() {
     use std::process::Stdio;
     let (_dir, mut command) = check_command(SCENE);
     // As `fbksd-embree check scene.pbrt | head -0`: the reader is gone before the first line.
-    let mut child = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
-    drop(child.stdout.take());
-    let out = child.wait_with_output().unwrap();
+    // The reader end is closed before the child starts; closing it after spawning raced
+    // with a child fast enough to write everything into the pipe's buffer first.
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = command.stdout(writer).stderr(Stdio::piped()).output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     const SIGPIPE: i32 = 13;
