@@ -114,39 +114,47 @@ impl Permutation {
             values.iter_mut().for_each(|v| *v = self.apply(*v));
             return;
         }
-        let (mask, (s1, s2), n) = (self.mask as u32, self.shifts, self.n);
-        let rounds = self.rounds.map(|(x, m, a)| (x as u32, m as u32, a as u32));
-        let round = |mut v: u32| {
-            for (xor, multiply, add) in rounds {
-                v = (v ^ xor) & mask;
-                v = v.wrapping_mul(multiply) & mask;
-                v ^= v >> s1;
-                v = v.wrapping_add(add) & mask;
-                v = v.wrapping_mul(0x6935_FA69_0929_EB3F_u64 as u32) & mask;
-                v ^= v >> s2;
-            }
-            v
-        };
+        let (n, rounds) = (self.n, self.rounds_u32());
+        let round = |v: u32| self.rounds_in_u32(v, &rounds);
         let mut lanes = [0u32; LANES];
         let lanes = &mut lanes[..values.len()];
         for (l, v) in lanes.iter_mut().zip(values.iter()) {
             *l = round((*v & self.mask) as u32);
         }
-        loop {
-            let mut again = false;
+        // Checked before each further round: for a power-of-two `n` (most
+        // budgets) no lane is ever outside.
+        while lanes.iter().fold(false, |any, &l| any | (l as u64 >= n)) {
             for l in lanes.iter_mut() {
-                let outside = *l as u64 >= n;
-                again |= outside;
                 let next = round(*l);
-                *l = if outside { next } else { *l };
-            }
-            if !again {
-                break;
+                *l = if *l as u64 >= n { next } else { *l };
             }
         }
         for (v, l) in values.iter_mut().zip(lanes.iter()) {
             *v = *l as u64;
         }
+    }
+
+    /// The round keys in 32 bits, for [`Permutation::rounds_in_u32`].
+    #[inline(always)]
+    fn rounds_u32(&self) -> [(u32, u32, u32); 3] {
+        self.rounds.map(|(x, m, a)| (x as u32, m as u32, a as u32))
+    }
+
+    /// One pass of the three rounds of [`Permutation::apply`] in 32 bits,
+    /// for a mask below 2³² (the same values: every step keeps only the
+    /// low `bits` bits).
+    #[inline(always)]
+    fn rounds_in_u32(&self, mut v: u32, rounds: &[(u32, u32, u32); 3]) -> u32 {
+        let (mask, (s1, s2)) = (self.mask as u32, self.shifts);
+        for &(xor, multiply, add) in rounds {
+            v = (v ^ xor) & mask;
+            v = v.wrapping_mul(multiply) & mask;
+            v ^= v >> s1;
+            v = v.wrapping_add(add) & mask;
+            v = v.wrapping_mul(0x6935_FA69_0929_EB3F_u64 as u32) & mask;
+            v ^= v >> s2;
+        }
+        v
     }
 
     #[inline(always)]
@@ -172,6 +180,51 @@ impl Permutation {
     }
 }
 
+/// Up to this many lines (k ≤ 16, up to 256 spp) a pixel's line
+/// permutations are made once per pixel, as tables of bytes.
+const FEW_LINES: usize = 16;
+
+/// Every line's permutation of `0..k`, [`permute`]`(position, k, key ^
+/// mix(line))`, into `table[line · k + position]`, for k ≤ [`FEW_LINES`].
+/// A line's positions run their rounds together in one vector of 32-bit
+/// lanes (as in [`Permutation::apply_all`]); the lines are independent, so
+/// the processor overlaps them.
+#[inline(always)]
+fn line_permutations(strata: &Strata, key: u64, table: &mut [u8]) {
+    let k = strata.k as usize;
+    debug_assert!(k <= FEW_LINES && table.len() == k * k);
+    if k <= 1 {
+        table.fill(0);
+        return;
+    }
+    let n = strata.k as u32;
+    for (line, out) in table.chunks_exact_mut(k).enumerate() {
+        let permutation = Permutation::new(strata.k, key ^ strata.line_hashes[line]);
+        let keys = permutation.rounds_u32();
+        let rounds = |values: &[u32; FEW_LINES], out: &mut [u32; FEW_LINES]| {
+            for (o, v) in out.iter_mut().zip(values) {
+                *o = permutation.rounds_in_u32(*v, &keys);
+            }
+        };
+        // Lanes past k are never read.
+        let mut values = [0u32; FEW_LINES];
+        rounds(&std::array::from_fn(|position| position as u32), &mut values);
+        // Every lane compared, not up to the first outside one: one vector compare.
+        let outside =
+            |values: &[u32; FEW_LINES]| (0..FEW_LINES).fold(false, |any, i| any | ((i < k) & (values[i] >= n)));
+        while outside(&values) {
+            let mut next = [0u32; FEW_LINES];
+            rounds(&values, &mut next);
+            for (v, w) in values.iter_mut().zip(next) {
+                *v = if *v >= n { w } else { *v };
+            }
+        }
+        // Narrowed as a whole vector, then the line's k bytes copied.
+        let bytes = values.map(|v| v as u8);
+        out.copy_from_slice(&bytes[..k]);
+    }
+}
+
 /// Draws the random parameters of samples.
 #[derive(Debug, Clone, Copy)]
 pub struct Sampler {
@@ -189,6 +242,8 @@ pub struct Strata {
     inv_k: f64,
     by_k: Divisor,
     cells: u64,
+    /// `mix(line)` of the first lines, for their permutations' keys.
+    line_hashes: [u64; FEW_LINES],
 }
 
 impl Strata {
@@ -201,7 +256,15 @@ impl Strata {
     pub fn new(spp: u64) -> Self {
         let spp = spp.max(1);
         let k = (spp as f64).sqrt().ceil().max(1.0) as u64;
-        Strata { spp, inv_spp: 1.0 / spp as f64, k, inv_k: 1.0 / k as f64, by_k: Divisor::new(k), cells: k * k }
+        Strata {
+            spp,
+            inv_spp: 1.0 / spp as f64,
+            k,
+            inv_k: 1.0 / k as f64,
+            by_k: Divisor::new(k),
+            cells: k * k,
+            line_hashes: std::array::from_fn(|line| mix(line as u64)),
+        }
     }
 }
 
@@ -354,7 +417,6 @@ impl Sampler {
         let inv_k = strata.inv_k;
         // The line permutations of a pixel as tables, made once when there
         // are few lines (up to 256 spp; their values fit a byte).
-        const FEW_LINES: usize = 16;
         let k = strata.k as usize;
         let mut tables = [[0u8; FEW_LINES * FEW_LINES]; 2];
         for (first, out) in (s0..).step_by(BATCH).zip(out.chunks_mut(BATCH)) {
@@ -377,42 +439,47 @@ impl Sampler {
                 // permutation of rows; likewise the sub-row.
                 let keyed = k <= FEW_LINES;
                 if keyed {
-                    // Each line's whole permutation, in lanes: table[axis][line · k + position].
+                    // Each line's whole permutation: table[axis][line · k + position].
                     for (axis, table) in tables.iter_mut().enumerate() {
-                        for line in 0..k {
-                            let mut row = [0u64; FEW_LINES];
-                            for (position, v) in row.iter_mut().enumerate() {
-                                *v = position as u64;
-                            }
-                            let p = Permutation::new(strata.k, pixel.line_keys[which][axis] ^ mix(line as u64));
-                            p.apply_all(&mut row[..k]);
-                            for (t, v) in table[line * k..line * k + k].iter_mut().zip(row) {
-                                *t = v as u8;
-                            }
-                        }
+                        line_permutations(strata, pixel.line_keys[which][axis], &mut table[..k * k]);
                     }
                 }
-                let key = |axis: usize, line: u64| pixel.line_keys[which][axis] ^ mix(line);
-                for (i, p) in out.iter_mut().enumerate() {
-                    let s = first + i as u64;
-                    let h = mix(pixel.seed ^ (s << 4 | d));
+                // Stage by stage over the samples, each stage a loop of
+                // independent lanes: the sub-positions, the jitter hashes,
+                // then the coordinates.
+                let (mut sub_x, mut sub_y) = ([0u64; BATCH], [0u64; BATCH]);
+                if keyed {
+                    for i in 0..n {
+                        let (column, row) = (columns[i] as usize, rows[i] as usize);
+                        (sub_x[i], sub_y[i]) = (tables[0][column * k + row] as u64, tables[1][row * k + column] as u64);
+                    }
+                } else {
+                    let key = |axis: usize, line: u64| pixel.line_keys[which][axis] ^ mix(line);
+                    for i in 0..n {
+                        let (column, row) = (columns[i], rows[i]);
+                        (sub_x[i], sub_y[i]) =
+                            (permute(row, strata.k, key(0, column)), permute(column, strata.k, key(1, row)));
+                    }
+                }
+                let mut hashes = [0u64; BATCH];
+                for (i, h) in hashes[..n].iter_mut().enumerate() {
+                    *h = mix(pixel.seed ^ ((first + i as u64) << 4 | d));
+                }
+                let (mut xs, mut ys) = ([0f64; BATCH], [0f64; BATCH]);
+                for i in 0..n {
+                    // One hash gives both jitters (32 bits each).
+                    let h = hashes[i];
                     let (ux, uy) =
                         ((h >> 32) as i64 as f64 * TWO_TO_MINUS_32, (h & 0xFFFF_FFFF) as i64 as f64 * TWO_TO_MINUS_32);
-                    let (column, row) = (columns[i], rows[i]);
-                    let (sub_x, sub_y) = if keyed {
-                        (
-                            tables[0][column as usize * k + row as usize] as u64,
-                            tables[1][row as usize * k + column as usize] as u64,
-                        )
-                    } else {
-                        (permute(row, strata.k, key(0, column)), permute(column, strata.k, key(1, row)))
-                    };
-                    let (c, r) = (column as i64 as f64, row as i64 as f64);
-                    let (sx, sy) = (sub_x as i64 as f64, sub_y as i64 as f64);
-                    let (x, y) =
+                    let (c, r) = (columns[i] as i64 as f64, rows[i] as i64 as f64);
+                    let (sx, sy) = (sub_x[i] as i64 as f64, sub_y[i] as i64 as f64);
+                    (xs[i], ys[i]) =
                         (below_one((c + (sx + ux) * inv_k) * inv_k), below_one((r + (sy + uy) * inv_k) * inv_k));
+                }
+                let (px, py) = (pixel.x as f64, pixel.y as f64);
+                for (p, (x, y)) in out.iter_mut().zip(xs.into_iter().zip(ys)) {
                     match which {
-                        0 => (p[0], p[1]) = (pixel.x as f64 + x, pixel.y as f64 + y),
+                        0 => (p[0], p[1]) = (px + x, py + y),
                         1 => (p[2], p[3]) = (x, y),
                         _ => (p[5], p[6]) = (x, y),
                     }
