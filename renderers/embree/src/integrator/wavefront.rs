@@ -698,28 +698,35 @@ impl Chunk<'_> {
 }
 
 impl Batch {
-    /// Once a quarter of the lanes in use hold ended paths, closes up the
-    /// rest at the front (until then the ended paths' lanes are masked off).
+    /// Once a quarter of the lanes in use hold ended paths, moves live
+    /// paths from the back into the ended paths' lanes at the front, so the
+    /// live ones fill the first lanes (until then the ended paths' lanes are
+    /// masked off). Only the holes are filled: a path's values do not depend
+    /// on its lane.
     fn retire(&mut self, chunks: usize) {
         let alive: usize = self.paths[..chunks].iter().map(|p| p.alive.0.iter().filter(|a| **a).count()).sum();
         if alive * 4 > self.live * 3 {
             return;
         }
-        let mut kept = 0;
-        for i in 0..self.live {
-            let (c, k) = (i / W, i % W);
-            if !self.paths[c].alive.0[k] {
-                continue;
+        let is_alive = |paths: &[Paths], i: usize| paths[i / W].alive.0[i % W];
+        let (mut front, mut back) = (0, self.live);
+        loop {
+            while front < back && is_alive(&self.paths, front) {
+                front += 1;
             }
-            if kept != i {
-                let state = self.paths[c].get(k);
-                self.paths[kept / W].put(kept % W, &state);
+            while back > front && !is_alive(&self.paths, back - 1) {
+                back -= 1;
             }
-            kept += 1;
+            if front >= back {
+                break;
+            }
+            // `front` ended, `back - 1` is live and past it.
+            back -= 1;
+            let state = self.paths[back / W].get(back % W);
+            self.paths[front / W].put(front % W, &state);
+            self.paths[back / W].alive.0[back % W] = false;
+            front += 1;
         }
-        for i in kept..self.live {
-            self.paths[i / W].alive.0[i % W] = false;
-        }
-        self.live = kept;
+        self.live = front;
     }
 }
