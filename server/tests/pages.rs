@@ -77,6 +77,16 @@ on_both_databases!(forms_register_log_in_and_create_projects_with_csrf_tokens, |
     .await;
     assert_eq!(status, 200);
     assert!(page.contains("git clone") && page.contains("/git/mine.git"), "{page}");
+    // A post without a visibility (by hand, say) makes a private project;
+    // one without a name is answered with a page that says so.
+    let (status, page) =
+        text(form("/projects", &[("csrf_token", &session_csrf), ("name", "quiet")]).await.unwrap()).await;
+    assert_eq!(status, 200, "{page}");
+    assert!(page.contains("/git/quiet.git") && page.contains("private"), "{page}");
+    let (status, page) =
+        text(form("/projects", &[("csrf_token", &session_csrf), ("visibility", "public")]).await.unwrap()).await;
+    assert_eq!(status, 422, "{page}");
+    assert!(page.contains("<html") && page.contains("missing field `name`"), "{page}");
 
     // Access tokens from the settings page are shown once and work.
     let (_, page) =

@@ -81,7 +81,7 @@ pub async fn login(
     State(state): State<AppState>,
     ClientIp(ip): ClientIp,
     headers: axum::http::HeaderMap,
-    Form(form): Form<CredentialsForm>,
+    PageForm(form): PageForm<CredentialsForm>,
 ) -> PageResult {
     check_form_cookie(&headers, &form.csrf_token)?;
     let attempt = match state.throttle.log_in(ip, &form.email) {
@@ -107,7 +107,7 @@ pub async fn register(
     State(state): State<AppState>,
     ClientIp(ip): ClientIp,
     headers: axum::http::HeaderMap,
-    Form(form): Form<CredentialsForm>,
+    PageForm(form): PageForm<CredentialsForm>,
 ) -> PageResult {
     check_form_cookie(&headers, &form.csrf_token)?;
     let checked = (Email::parse(&form.email), Password::parse(&form.password));
@@ -142,7 +142,7 @@ pub async fn resend_verification(
     State(state): State<AppState>,
     ClientIp(ip): ClientIp,
     headers: axum::http::HeaderMap,
-    Form(form): Form<AddressForm>,
+    PageForm(form): PageForm<AddressForm>,
 ) -> PageResult {
     check_form_cookie(&headers, &form.csrf_token)?;
     let email = match Email::parse(&form.email) {
@@ -214,7 +214,11 @@ pub struct TokenForm {
 }
 
 /// `POST /settings/tokens`.
-pub async fn create_token(State(state): State<AppState>, visitor: Visitor, Form(form): Form<TokenForm>) -> PageResult {
+pub async fn create_token(
+    State(state): State<AppState>,
+    visitor: Visitor,
+    PageForm(form): PageForm<TokenForm>,
+) -> PageResult {
     let user = visitor.check(&form.csrf_token)?;
     let (_, token) = accounts::create_access_token(&state.pool, &user.id, &form.name).await?;
     settings_page(&state, visitor.0, token).await

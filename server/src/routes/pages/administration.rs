@@ -68,7 +68,11 @@ pub struct HideForm {
 }
 
 /// `POST /admin/hide`.
-pub async fn admin_hide(State(state): State<AppState>, visitor: Visitor, Form(form): Form<HideForm>) -> PageResult {
+pub async fn admin_hide(
+    State(state): State<AppState>,
+    visitor: Visitor,
+    PageForm(form): PageForm<HideForm>,
+) -> PageResult {
     visitor.check(&form.csrf_token)?;
     admin_of(&visitor.0)?;
     if form.reason.trim().is_empty() {
@@ -90,7 +94,11 @@ pub struct SeasonForm {
 }
 
 /// `POST /admin/seasons`.
-pub async fn admin_season(State(state): State<AppState>, visitor: Visitor, Form(form): Form<SeasonForm>) -> PageResult {
+pub async fn admin_season(
+    State(state): State<AppState>,
+    visitor: Visitor,
+    PageForm(form): PageForm<SeasonForm>,
+) -> PageResult {
     visitor.check(&form.csrf_token)?;
     admin_of(&visitor.0)?;
     let started = crate::admin::start_season(&state, &form.note).await?;

@@ -272,6 +272,22 @@ pub async fn viewer_file(Path(name): Path<String>) -> Response {
     ([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "public, max-age=3600")], *body).into_response()
 }
 
+/// A page's form: as [`Form`], but one that cannot be read (a field
+/// missing or malformed, as a hand-written post can send) is refused with
+/// an error page that names what was wrong, not axum's bare text.
+pub struct PageForm<T>(pub T);
+
+impl<T: serde::de::DeserializeOwned> FromRequest<AppState> for PageForm<T> {
+    type Rejection = PageError;
+
+    async fn from_request(request: axum::extract::Request, state: &AppState) -> Result<Self, PageError> {
+        let Form(form) = Form::<T>::from_request(request, state)
+            .await
+            .map_err(|e| ApiError::new(e.status(), "invalid_form", e.body_text()))?;
+        Ok(PageForm(form))
+    }
+}
+
 /// A form with only its CSRF token.
 #[derive(Deserialize)]
 pub struct CsrfForm {
@@ -292,9 +308,7 @@ impl FromRequest<AppState> for Button {
         let (mut parts, body) = request.into_parts();
         let visitor = Visitor::from_request_parts(&mut parts, state).await?;
         let request = axum::extract::Request::from_parts(parts, body);
-        let Form(form) = Form::<CsrfForm>::from_request(request, state)
-            .await
-            .map_err(|e| ApiError::new(e.status(), "invalid_form", e.body_text()))?;
+        let PageForm(form) = PageForm::<CsrfForm>::from_request(request, state).await?;
         let user = visitor.check(&form.csrf_token)?.clone();
         Ok(Button { user, nav: visitor.0 })
     }

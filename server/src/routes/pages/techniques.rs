@@ -70,14 +70,20 @@ pub async fn environments_page(Visitor(nav): Visitor) -> PageResult {
 pub struct ProjectForm {
     csrf_token: String,
     name: String,
+    /// Private unless the form says otherwise, as a new repository is.
+    #[serde(default = "private")]
     visibility: String,
+}
+
+fn private() -> String {
+    "private".to_string()
 }
 
 /// `POST /projects`.
 pub async fn create_project(
     State(state): State<AppState>,
     visitor: Visitor,
-    Form(form): Form<ProjectForm>,
+    PageForm(form): PageForm<ProjectForm>,
 ) -> PageResult {
     let user = visitor.check(&form.csrf_token)?;
     let project = crate::projects::create(&state, user, &form.name, &form.visibility).await?;
