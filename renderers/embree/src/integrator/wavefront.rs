@@ -5,7 +5,8 @@
 //! every live path's ray (a chunk is one Embree packet), reconstruct the
 //! surfaces hit, add the emission found, pick the materials, take a light
 //! sample and prepare its shadow ray, sample the BSDF, trace the shadow
-//! rays, then retire the paths that ended and close up the rest.
+//! rays, then retire the paths that ended (live paths from the back move
+//! into their lanes).
 //!
 //! The common cases ([`crate::scene::flat`]: plain meshes, constant diffuse
 //! materials, small mesh lights) are shaded in SIMD lanes by the lane twins
