@@ -82,7 +82,7 @@ on_both_databases!(forms_register_log_in_and_create_projects_with_csrf_tokens, |
     let (status, page) =
         text(form("/projects", &[("csrf_token", &session_csrf), ("name", "quiet")]).await.unwrap()).await;
     assert_eq!(status, 200, "{page}");
-    assert!(page.contains("/git/quiet.git") && page.contains("private"), "{page}");
+    assert!(page.contains("/git/quiet.git") && page.contains("quiet · private"), "{page}");
     let (status, page) =
         text(form("/projects", &[("csrf_token", &session_csrf), ("visibility", "public")]).await.unwrap()).await;
     assert_eq!(status, 422, "{page}");

@@ -581,7 +581,7 @@ mod tests {
         let sampler = Sampler::new(37, 23, 5);
         // Budgets square and not, more lines than a batch (k = 71), batches
         // starting mid-pixel, and every subset of the pairs and TIME.
-        for spp in [64u64, 1, 2, 3, 5, 16, 17, 100, 5000] {
+        for spp in [64u64, 1, 2, 3, 5, 16, 17, 100, 256, 257, 5000] {
             let strata = Strata::new(spp);
             for needed in [0x7Fu8, 0b11, 0b1_0000, 0b110_0000, 0b1100, 0b1_0011] {
                 for (x, y) in [(0, 0), (36, 22), (7, 11)] {
