@@ -43,7 +43,8 @@ on_both_databases!(register_verify_log_in_and_out, |db: Db| async move {
         (403, "email_not_verified".into())
     );
 
-    // The link in the mail verifies the address, once.
+    // The link, read from the mail file as it is (7-bit: nothing to decode), verifies the address, once.
+    assert!(server.mails_to("ada@example.org")[0].contains("Content-Transfer-Encoding: 7bit"));
     let link = server.link_in_mail("ada@example.org", "/accounts/verify?token=");
     let page = browser.get(&link).send().await.unwrap();
     assert_eq!(page.status(), 200);

@@ -57,8 +57,8 @@ fn word_after(line: &str, marker: &str) -> String {
 }
 
 /// Registers `email` as a newcomer does: the verification link comes from
-/// the server's output (decoded, unlike the outbox's quoted-printable
-/// file), then logs in and makes an access token.
+/// the server's output (where README says to look), then logs in and
+/// makes an access token.
 async fn newcomer(server: &TestServer, process: &ServerProcess, email: &str) -> common::TestUser {
     let browser = server.browser();
     let created = browser

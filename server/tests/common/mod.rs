@@ -105,7 +105,7 @@ impl TestServer {
     }
 
     /// The mails in the outbox sent to `to`, oldest first (RFC 5322 text,
-    /// quoted-printable bodies decoded).
+    /// quoted-printable bodies decoded; 7-bit ones are as the file holds them).
     pub fn mails_to(&self, to: &str) -> Vec<String> {
         let mut mails: Vec<(std::time::SystemTime, String)> = std::fs::read_dir(&self.outbox)
             .map(|d| d.filter_map(|e| e.ok()).map(|e| e.path()).collect::<Vec<_>>())
@@ -116,7 +116,16 @@ impl TestServer {
             .filter(|(_, text)| text.lines().any(|l| l.starts_with("To:") && l.contains(to)))
             .collect();
         mails.sort_by_key(|(t, _)| *t);
-        mails.into_iter().map(|(_, m)| decode_quoted_printable(&m)).collect()
+        mails
+            .into_iter()
+            .map(|(_, m)| {
+                if m.contains("Content-Transfer-Encoding: quoted-printable") {
+                    decode_quoted_printable(&m)
+                } else {
+                    m
+                }
+            })
+            .collect()
     }
 
     /// The first URL in the latest mail to `to` that contains `path`.
