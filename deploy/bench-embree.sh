@@ -11,13 +11,26 @@ out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cornell=scenes/production/cornell-box/scene.pbrt
 ./target/release/fbksd-embree export-mitsuba "$cornell" "$out/mitsuba-scene"
-echo "== Cornell box, 512×512, 64 spp =="
-./target/release/fbksd-embree bench "$cornell" --spp 64 --out-dir "$out/ours" | tee "$out/ours.txt"
-python3 renderers/embree/bench/mitsuba_bench.py "$out/mitsuba-scene" 64 "$out/mitsuba.exr" | tee "$out/mitsuba.txt"
 # The all-cores figure is the last "M samples/s" of each line.
 all_cores() { grep -o '[0-9.]* M samples/s' "$1" | tail -n 1 | cut -d' ' -f1; }
-python3 -c "import sys; print(f'ours / Mitsuba on all cores: {float(sys.argv[1]) / float(sys.argv[2]):.2f}x')" \
-    "$(all_cores "$out/ours.txt")" "$(all_cores "$out/mitsuba.txt")"
+# Rounds of one run each, alternating, so that a machine whose speed
+# drifts over minutes (a shared host) slows both alike; the ratio given is
+# the median of the rounds' ratios.
+rounds=${FBKSD_BENCH_ROUNDS:-3}
+echo "== Cornell box, 512×512, 64 spp, $rounds rounds of ours then Mitsuba =="
+ratios=()
+for round in $(seq "$rounds"); do
+    ./target/release/fbksd-embree bench "$cornell" --spp 64 --out-dir "$out/ours" | tee "$out/ours.txt"
+    python3 renderers/embree/bench/mitsuba_bench.py "$out/mitsuba-scene" 64 "$out/mitsuba.exr" | tee "$out/mitsuba.txt"
+    ratios+=("$(all_cores "$out/ours.txt")/$(all_cores "$out/mitsuba.txt")")
+done
+python3 - "${ratios[@]}" <<'PY'
+import statistics, sys
+pairs = [tuple(map(float, r.split("/"))) for r in sys.argv[1:]]
+each = ", ".join(f"{o:.2f}/{m:.2f} = {o / m:.2f}x" for o, m in pairs)
+print(f"ours / Mitsuba on all cores, by round: {each}")
+print(f"ours / Mitsuba on all cores: {statistics.median(o / m for o, m in pairs):.2f}x (median of {len(pairs)} rounds)")
+PY
 echo "== Hair, 512×512, 16 spp =="
 ./target/release/fbksd-embree bench scenes/production/hair/scene.pbrt --spp 16
 echo "== Agreement of the two Cornell images (each 64 spp) =="
