@@ -280,7 +280,13 @@ board_before=$(api GET /api/v1/leaderboard)
 grep -q box-filter-cpp <<<"$board_before" || fail "the published set is not on the board: $board_before"
 
 # --- 4. a runner stopped mid-job; the other one finishes it --------------------------------
-commit "a third time"
+# This job's build waits 20 s at configure time, so the runner is stopped
+# while it holds the job however slowly this script polls (the plain box
+# filter's whole job took 5.9 s, and a loaded machine once let it finish
+# before the stop).
+echo 'execute_process(COMMAND sleep 20)  # compose-check: a build that lasts' >>"$work/repo/CMakeLists.txt"
+git -C "$work/repo" add CMakeLists.txt
+commit "a third time, with a slow build"
 push >/dev/null || fail "the third push failed"
 job3=$(new_job)
 wait_state "$job3" running 120
@@ -296,6 +302,8 @@ step=$(now_ms)
 docker stop "$container" >/dev/null
 timing "docker stop of the runner holding job $job3: $(seconds_since "$step") s"
 say "stopped runner $holder ($container) during job $job3"
+state3=$(job "$job3" | json 'd["state"]')
+[ "$state3" != succeeded ] || fail "job $job3 had already succeeded when its runner was stopped: nothing to hand out again"
 # Queued again when its lease expires, then claimed at once by the other
 # runner: the second attempt is what shows.
 for _ in $(seq 240); do
