@@ -20,6 +20,11 @@ pub enum Mailer {
     Smtp(AsyncSmtpTransport<Tokio1Executor>),
 }
 
+/// `text` as a mail's one plain-text part (see [`plain_body`]).
+fn plain_part(text: String) -> SinglePart {
+    SinglePart::builder().header(ContentType::TEXT_PLAIN).body(plain_body(text))
+}
+
 /// `text` as a mail body: as it is (7-bit, CRLF line ends) when it can be
 /// (ASCII without NUL or CR, lines of at most 998 characters, RFC 5322's
 /// limit), else in lettre's choice of encoding. lettre itself would encode
@@ -60,7 +65,7 @@ impl Mailer {
             .from(from.parse().map_err(|e| MailError(format!("sender {from:?}: {e}")))?)
             .to(to.parse().map_err(|e| MailError(format!("recipient {to:?}: {e}")))?)
             .subject(subject)
-            .singlepart(SinglePart::builder().header(ContentType::TEXT_PLAIN).body(plain_body(body.clone())))
+            .singlepart(plain_part(body.clone()))
             .map_err(|e| MailError(e.to_string()))?;
         match self {
             Mailer::Outbox(t) => {
@@ -79,13 +84,10 @@ impl Mailer {
 
 #[cfg(test)]
 mod tests {
-    use super::plain_body;
-    use lettre::message::header::ContentType;
-    use lettre::message::SinglePart;
+    use super::plain_part;
 
     fn formatted(text: &str) -> String {
-        let part = SinglePart::builder().header(ContentType::TEXT_PLAIN).body(plain_body(text.to_string()));
-        String::from_utf8(part.formatted()).unwrap()
+        String::from_utf8(plain_part(text.to_string()).formatted()).unwrap()
     }
 
     #[test]
