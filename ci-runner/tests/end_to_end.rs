@@ -122,6 +122,11 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
             assert_eq!((result.width, result.height), (reference.width, reference.height), "{scene}");
             assert!(run["error_maps"]["MSE"].is_string() && run["log"].is_string(), "{run}");
             assert!(run["wall_ms"].as_f64().unwrap() > 0.0 && run["peak_memory_bytes"].as_u64().unwrap() > 0, "{run}");
+            // The cost is read off the sandboxes' cgroups: the technique's CPU
+            // after its hello (Python's imports are start-up), the renderer's samples.
+            let ms = |key: &str| run[key].as_f64().unwrap_or_else(|| panic!("no {key}: {run}"));
+            assert!(ms("technique_cpu_ms") > 0.0 && ms("startup_ms") > 0.0, "{run}");
+            assert!(ms("cost_ms") > ms("technique_cpu_ms"), "the renderer's samples are in the cost: {run}");
             // The path tracers make every feature buffer with their reference.
             if scene["name"] == "cornell-box" || scene["name"] == "spheres-sky" {
                 for buffer in fbksd_exchange::scenes::FEATURE_BUFFERS {

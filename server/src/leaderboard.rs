@@ -58,8 +58,8 @@ pub struct Entry {
     pub tied_with: Vec<String>,
     /// Technique time (median over the repeats).
     pub technique_ms: f64,
-    /// Time to the result: technique time + waiting for the renderer (median).
-    pub time_ms: f64,
+    /// The cost, the equal-time axis (`fbksd_exchange::cost`; median).
+    pub cost_ms: f64,
     /// Coefficient of variation of the technique time over the repeats.
     pub time_cv: Option<f64>,
     /// The result image, if uploaded.
@@ -381,6 +381,7 @@ fn assemble(
         .collect();
     let at_spp = equal_spp(&by_sort, lower_is_better);
     let at_time = equal_time(&by_sort, lower_is_better);
+    let costs = fbksd_exchange::cost::Costs::of(&index);
     let places: BTreeMap<(&str, u64, &str), &fbksd_exchange::ranking::Place> = at_spp
         .cells
         .iter()
@@ -411,7 +412,7 @@ fn assemble(
                 .flatten()
                 .collect(),
             technique_ms: run.technique_ms,
-            time_ms: run.time(),
+            cost_ms: costs.of_run(run),
             time_cv: run.timing.filter(|_| run.repeats.len() > 1).map(|t| t.technique.cv),
             image: run.image.clone(),
         });
@@ -549,6 +550,10 @@ mod tests {
                 wall_ms: time_ms,
                 cpu_ms: time_ms,
                 waiting_ms: 0.0,
+                technique_cpu_ms: 0.0,
+                render_cpu_ms: 0.0,
+                sample_floats: 0,
+                startup_ms: 0.0,
                 peak_memory_bytes: 0,
                 used_samples: 0,
                 metrics: [("MSE".to_string(), *v)].into(),

@@ -81,6 +81,7 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
     .await
     .map_err(ServiceError::internal)?;
     doc.techniques = techniques;
+    doc.set_costs(&entries);
     Ok(doc)
 }
 

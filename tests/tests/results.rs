@@ -217,3 +217,58 @@ fn two_scenes_with_one_name_are_refused() {
     ]);
     assert!(!ok && err.contains("two scenes are named \"twin\""), "{err}");
 }
+
+/// The equal-time rule against noise, as `fbksd run` is used: the same
+/// program under two names ties at equal samples and at equal time (its
+/// copies' costs differ only by noise), and the same program with a busy
+/// loop that doubles its work ranks below it at equal time, while tying at
+/// equal samples (its images are the same).
+#[test]
+fn equal_time_ties_copies_and_ranks_doubled_work_below() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scenes/bands");
+    std::fs::create_dir_all(&scene).unwrap();
+    std::fs::write(
+        scene.join("bands.expr"),
+        "width := 160;\nheight := 120;\n#\nvar v := sin(IMAGE_X * 0.3 + LIGHT_X * 3) * 0.5 + 0.5;\n\
+         COLOR_R := v; COLOR_G := v * LIGHT_Y; COLOR_B := 1 - v;\n",
+    )
+    .unwrap();
+    scene_meta(&scene, "bands", "bands.expr", "procedural", &[4, 16], 160, 120);
+    let out = Command::new(bin("fbksd-procedural")).arg("reference").arg(&scene).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let results = dir.path().join("results");
+    let r = results.to_str().unwrap();
+    // Thirty rounds of arithmetic per sample weigh about as much as rendering it.
+    let box_filter = |name: &str, mode: &str| format!("{name}={} {mode} 30", bin("fbksd-test-technique"));
+    let (a, b, doubled) =
+        (box_filter("a", "box-filter"), box_filter("b", "box-filter"), box_filter("doubled", "box-filter-doubled"));
+    let scene = scene.to_str().unwrap();
+    let (ok, _, err) =
+        fbksd(&["run", "-t", &a, "-t", &b, "-t", &doubled, "-s", scene, "--repeats", "3", "--results", r]);
+    assert!(ok, "{err}");
+    let s = dir.path().join("scenes");
+    let (ok, _, err) =
+        fbksd(&["results", "compute", "--results", r, "--scenes", s.to_str().unwrap(), "--metrics", "MSE"]);
+    assert!(ok, "{err}");
+    let index: serde_json::Value = serde_json::from_slice(&std::fs::read(results.join("index.json")).unwrap()).unwrap();
+    let rank = |kind: &str, t: &str| {
+        let standings = index["rankings"][kind]["standings"].as_array().unwrap();
+        standings.iter().find(|s| s["technique"] == t).unwrap()["mean_rank"].as_f64().unwrap()
+    };
+    let runs = index["runs"].as_array().unwrap();
+    let costs: Vec<String> = runs
+        .iter()
+        .map(|run| {
+            let cpu: Vec<String> =
+                run["repeats"].as_array().unwrap().iter().map(|p| format!("{:.1}", p["technique_cpu_ms"])).collect();
+            format!("{} {} spp: technique CPU {}", run["technique"], run["spp"], cpu.join("/"))
+        })
+        .collect();
+    let cells = &index["rankings"]["equal_time"]["cells"];
+    for t in ["a", "b", "doubled"] {
+        assert_eq!(rank("equal_spp", t), 2.0, "the same images tie at equal samples");
+    }
+    assert_eq!(rank("equal_time", "a"), rank("equal_time", "b"), "copies tie at equal time: {costs:?}\n{cells}");
+    assert!(rank("equal_time", "doubled") > rank("equal_time", "a"), "doubled work ranks below: {costs:?}\n{cells}");
+}

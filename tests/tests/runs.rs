@@ -242,13 +242,9 @@ fn a_connection_without_the_session_token_is_refused() {
 #[test]
 fn work_outside_tile_callbacks_is_charged_to_the_technique() {
     let dir = tempfile::tempdir().unwrap();
-    let records = bench(
-        dir.path(),
-        vec![technique("idle-while-waiting"), technique("burn-while-waiting"), technique("sleep-before-request")],
-        &[1],
-        &["--fault", "slow-ms=1500"],
-        60,
-    );
+    let modes =
+        ["idle-while-waiting", "burn-while-waiting", "sleep-before-request", "burn-in-child", "burn-before-hello"];
+    let records = bench(dir.path(), modes.map(technique).to_vec(), &[1], &["--fault", "slow-ms=1500"], 60);
     let by = |mode: &str| records.iter().find(|r| r.technique == mode).unwrap();
     for r in &records {
         assert_status(r, RunStatus::Ok, "");
@@ -257,6 +253,7 @@ fn work_outside_tile_callbacks_is_charged_to_the_technique() {
     assert!(idle.times.waiting_ms >= 1400.0, "{:?}", idle.times);
     assert!(idle.times.technique_ms < 700.0, "an idle wait is not the technique's time: {:?}", idle.times);
     assert!(idle.times.background_cpu_ms < 200.0, "{:?}", idle.times);
+    assert!(idle.times.technique_cpu_ms < 300.0, "an idle wait costs nothing: {:?}", idle.times);
     // The burnt second is charged whether it overlaps the wait (as CPU time)
     // or outlasts it (as wall time, the technique then waits for its thread).
     let burn = by("burn-while-waiting");
@@ -269,4 +266,15 @@ fn work_outside_tile_callbacks_is_charged_to_the_technique() {
     );
     let sleep = by("sleep-before-request");
     assert!(sleep.times.technique_ms >= 1000.0, "a sleep outside a request is charged: {:?}", sleep.times);
+    // The cost is CPU time after the hello, in every thread and child process.
+    for r in [burn, by("burn-in-child")] {
+        assert!(r.times.technique_cpu_ms >= 950.0, "{}'s burnt second is in its cost: {:?}", r.technique, r.times);
+        assert!(r.times.render_cpu_ms > 0.0, "the renderer's CPU time is measured: {:?}", r.times);
+    }
+    // A second burnt before the hello is start-up: shown, not charged.
+    let early = by("burn-before-hello");
+    assert!(early.times.startup_ms >= 950.0, "{:?}", early.times);
+    assert!(early.times.technique_cpu_ms < 300.0, "start-up is not in the cost: {:?}", early.times);
+    assert!(early.times.cpu_ms >= 950.0, "the process's CPU time still shows it: {:?}", early.times);
+    assert!(records.iter().all(|r| r.sample_floats == 1), "one float per sample (COLOR_R)");
 }

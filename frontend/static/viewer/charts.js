@@ -1,9 +1,10 @@
 // FBKSD results viewer: charts. For one scene and metric, log–log lines of
 // the metric against spp or against time (one line per technique, a
 // legend that toggles lines, values on hover), and the equal-time view:
-// each technique's error at the time the fastest technique took at each
-// budget, read off its own error-versus-time line (interpolated in log–log,
-// never extrapolated). Each chart exports as SVG and PNG, its data as CSV.
+// each technique's error at the cost of the cheapest technique at each
+// budget, as the ranking found it (sdk/exchange/src/ranking.rs: the
+// document's equal-time cells; nothing is recomputed here). Each chart
+// exports as SVG and PNG, its data as CSV.
 "use strict";
 (function () {
   const FBKSD = (window.FBKSD = window.FBKSD || {});
@@ -11,58 +12,39 @@
   const PALETTE = ["#2454a6", "#d1495b", "#00798c", "#edae49", "#66a182", "#8d6a9f", "#3d405b", "#e07a5f", "#81b29a", "#9c6644", "#f28482", "#1b998b"];
   FBKSD.colourOf = (i) => PALETTE[i % PALETTE.length];
 
-  // "result" is the equal-time ranking's axis: the technique's time plus the
-  // time it waited for the renderer to render the samples it asked for.
+  // "cost" is the equal-time ranking's axis (sdk/exchange/src/cost.rs): the
+  // technique's CPU time after its hello plus its samples at the scene's
+  // render rate; "result" the wall time to the result beside it.
   const TIME_MEASURES = {
-    result: { label: "time to result", of: (r) => r.time_ms || r.wall_ms },
+    cost: { label: "cost (CPU)", of: (r) => r.cost_ms || r.time_ms || r.wall_ms },
+    result: { label: "wall time to result", of: (r) => r.time_ms || r.wall_ms },
     technique: { label: "technique time", of: (r) => r.technique_ms },
     total: { label: "render + technique time", of: (r) => r.technique_ms + r.render_ms },
     cpu: { label: "CPU time", of: (r) => r.cpu_ms },
   };
   FBKSD.TIME_MEASURES = TIME_MEASURES;
 
-  // Interpolates y at x on a polyline sorted by x, in log–log; null outside it.
-  function atTime(points, x) {
-    for (let i = 0; i < points.length; i++) {
-      const p = points[i];
-      if (p.x === x) return p.y;
-      if (i > 0 && points[i - 1].x < x && x < p.x) {
-        const q = points[i - 1];
-        const t = (Math.log(x) - Math.log(q.x)) / (Math.log(p.x) - Math.log(q.x));
-        return Math.exp(Math.log(q.y) + t * (Math.log(p.y) - Math.log(q.y)));
-      }
-    }
-    return null;
-  }
-  FBKSD.atTime = atTime;
-
   // The series of a chart: [{key, name, colour, points: [{x, y, spp}]}].
-  // kind: "spp", "time" or "equal_time".
+  // kind: "spp", "time" or "equal_time" (whose points are the ranking's
+  // equal-time cells of the scene and metric; the time axis is then the cost).
   FBKSD.chartSeries = function (doc, scene, metric, kind, measure) {
-    const time = TIME_MEASURES[measure] || TIME_MEASURES.result;
-    const series = doc.techniques.map((t, i) => {
-      const runs = t.runs.filter((r) => r.scene === scene && r.status === "ok" && r.metrics[metric] > 0);
-      const points = runs
-        .map((r) => ({ x: kind === "spp" ? r.spp : time.of(r), y: r.metrics[metric], spp: r.spp }))
-        .filter((p) => p.x > 0)
-        .sort((a, b) => a.x - b.x);
+    const time = TIME_MEASURES[kind === "equal_time" ? "cost" : measure] || TIME_MEASURES.cost;
+    const cells = kind === "equal_time" ? ((doc.rankings && doc.rankings.equal_time) || []).filter((c) => c.scene === scene && c.metric === metric) : [];
+    return doc.techniques.map((t, i) => {
+      let points;
+      if (kind === "equal_time") {
+        points = cells
+          .flatMap((c) => c.places.filter((p) => p.technique === t.key).map((p) => ({ x: c.at.ms, y: p.mean, spp: p.spp ?? c.at.spp })))
+          .sort((a, b) => a.x - b.x);
+      } else {
+        points = t.runs
+          .filter((r) => r.scene === scene && r.status === "ok" && typeof r.metrics[metric] === "number")
+          .map((r) => ({ x: kind === "spp" ? r.spp : time.of(r), y: r.metrics[metric], spp: r.spp }))
+          .filter((p) => p.x > 0)
+          .sort((a, b) => a.x - b.x);
+      }
       return { key: t.key, name: FBKSD.techniqueLabel(t), colour: FBKSD.colourOf(i), points };
     });
-    if (kind !== "equal_time") return series;
-    // Budgets: at each spp, the fastest technique's time.
-    const spps = [...new Set(doc.techniques.flatMap((t) => t.runs.filter((r) => r.scene === scene).map((r) => r.spp)))].sort((a, b) => a - b);
-    const budgets = spps
-      .map((spp) => {
-        const times = series.flatMap((s) => s.points.filter((p) => p.spp === spp).map((p) => p.x));
-        return times.length ? { spp, x: Math.min(...times) } : null;
-      })
-      .filter(Boolean);
-    return series.map((s) => ({
-      ...s,
-      points: budgets
-        .map((b) => ({ x: b.x, y: atTime(s.points, b.x), spp: b.spp }))
-        .filter((p) => p.y !== null),
-    }));
   };
 
   function el(name, attrs, text) {
@@ -92,8 +74,12 @@
     svg.replaceChildren();
     svg.append(el("rect", { x: 0, y: 0, width: W, height: H, fill: "#fff" }));
     svg.append(el("text", { x: L, y: 18, "font-size": 13, "font-family": "sans-serif", "font-weight": 600 }, opts.title));
-    const shown = series.filter((s) => !opts.hidden.has(s.key) && s.points.length);
+    // A log scale has no place for values ≤ 0: they are left out of the drawing (the CSV has them) and counted.
+    const visible = series.filter((s) => !opts.hidden.has(s.key));
+    const shown = visible.map((s) => ({ ...s, points: s.points.filter((p) => p.x > 0 && p.y > 0) })).filter((s) => s.points.length);
     const all = shown.flatMap((s) => s.points);
+    const left = visible.reduce((n, s) => n + s.points.length, 0) - all.length;
+    if (left) svg.append(el("text", { x: W - R, y: 18, "text-anchor": "end", "font-size": 11, "font-family": "sans-serif", fill: "#667085", class: "left-out" }, left + (left === 1 ? " value ≤ 0 not drawn" : " values ≤ 0 not drawn")));
     if (!all.length) {
       svg.append(el("text", { x: W / 2, y: H / 2, "text-anchor": "middle", "font-family": "sans-serif", fill: "#667085" }, "no values to draw"));
       return;

@@ -111,7 +111,7 @@
 
   FBKSD.drawCosts = function (table, doc, scene) {
     const head = document.createElement("tr");
-    for (const h of ["Technique", "spp", "Status", "Seeds", "Technique time", "Time to result", "Render time", "Wall", "CPU time", "Peak memory", "Samples", ...doc.metrics.map((m) => m.acronym), "Log"]) {
+    for (const h of ["Technique", "spp", "Status", "Seeds", "Cost", "Technique CPU", "Start-up", "Technique time", "Time to result", "Render time", "Wall", "CPU time", "Peak memory", "Samples", ...doc.metrics.map((m) => m.acronym), "Log"]) {
       head.append(cell("th", h));
     }
     const rows = [];
@@ -122,8 +122,9 @@
         const status = cell("td", r.status, r.status === "ok" ? "ok" : "error");
         if (r.message) status.title = r.message;
         row.append(cell("td", FBKSD.techniqueLabel(t)), cell("td", String(r.spp), "num"), status);
-        const cv = r.timing && r.seeds > 1 ? " (CV " + (r.timing.technique.cv * 100).toFixed(1) + " %)" : "";
-        for (const v of [String(r.seeds || 1), ms(r.technique_ms) + cv, ms(r.time_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
+        const cv = (spread) => (spread && r.seeds > 1 ? " (CV " + (spread.cv * 100).toFixed(1) + " %)" : "");
+        const timing = r.timing || {};
+        for (const v of [String(r.seeds || 1), ms(r.cost_ms), ms(r.technique_cpu_ms) + cv(timing.technique_cpu), ms(r.startup_ms), ms(r.technique_ms) + cv(timing.technique), ms(r.time_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
           row.append(cell("td", v, "num"));
         }
         for (const m of doc.metrics) {
@@ -149,7 +150,7 @@
           why.className = "message";
           why.append(cell("td", ""), cell("td", ""));
           const text = cell("td", r.message, "error");
-          text.colSpan = 10 + doc.metrics.length;
+          text.colSpan = 13 + doc.metrics.length;
           why.append(text);
           rows.push(why);
         }

@@ -53,7 +53,7 @@
         cropSize: 32,
         metric: doc.metrics[0] ? doc.metrics[0].acronym : null,
         chartX: "spp",
-        measure: "result",
+        measure: "cost",
         tag: "",
         hidden: new Set(),
       };
@@ -209,7 +209,8 @@
 
     chartLabels() {
       const s = this.state;
-      const time = FBKSD.TIME_MEASURES[s.measure].label + " (ms)";
+      // At equal time the axis is the ranking's: the cost.
+      const time = (FBKSD.TIME_MEASURES[s.chartX === "equal_time" ? "cost" : s.measure] || FBKSD.TIME_MEASURES.cost).label + " (ms)";
       return { x: s.chartX === "spp" ? "samples per pixel" : time, y: s.metric };
     }
 
@@ -264,7 +265,7 @@
         box.checked = !s.hidden.has(x.key);
         return h("li", {}, h("label", {}, box, h("span", { class: "swatch", style: "background:" + x.colour }), " " + x.name));
       }));
-      this.measureSelect.disabled = s.chartX === "spp";
+      this.measureSelect.disabled = s.chartX !== "time";
     }
 
     drawRanking() {

@@ -90,6 +90,7 @@ pub fn write(results: &ResultsDir, scenes: &BTreeMap<String, SceneMeta>, out: &P
     let lower_is_better =
         |acronym: &str| doc.metrics.iter().find(|m| m.acronym == acronym).is_none_or(|m| m.lower_is_better);
     doc.rankings = Rankings::of(&index.runs, lower_is_better);
+    doc.set_costs(&index.runs);
     let json = serde_json::to_string(&doc)?;
     std::fs::write(out.join("data.js"), format!("window.FBKSD_DOCUMENT = {json};\n"))?;
     std::fs::write(out.join("index.html"), index_html(&doc.title))?;

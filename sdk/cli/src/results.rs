@@ -113,6 +113,7 @@ fn show(results: &std::path::Path) -> anyhow::Result<()> {
     metrics.dedup();
     let at_spp = equal_spp(&index.runs, lower_is_better);
     let at_time = equal_time(&index.runs, lower_is_better);
+    let costs = fbksd_exchange::cost::Costs::of(&index.runs);
     let tied = |cells: &[Cell], scene: &str, at: &At, metric: &str, technique: &str| {
         cells
             .iter()
@@ -130,7 +131,7 @@ fn show(results: &std::path::Path) -> anyhow::Result<()> {
         println!("\n{scene}");
         let mut header = vec!["technique".to_string(), "spp".into(), "seeds".into(), "status".into()];
         header.extend(metrics.iter().map(|m| format!("{m} {}", arrow(m))));
-        header.extend(["technique ms (CV)".into(), "time to result ms".into()]);
+        header.extend(["cost ms".into(), "start-up ms".into(), "technique ms (CV)".into(), "time to result ms".into()]);
         let rows: Vec<Vec<String>> = runs
             .iter()
             .map(|r| {
@@ -153,6 +154,8 @@ fn show(results: &std::path::Path) -> anyhow::Result<()> {
                         value
                     }
                 }));
+                row.push(format!("{:.1}", costs.of_run(r)));
+                row.push(format!("{:.1}", r.startup_ms));
                 row.push(match r.timing.filter(|_| r.repeats.len() > 1) {
                     Some(t) => format!("{:.1} ({:.1} %)", r.technique_ms, t.technique.cv * 100.0),
                     None => format!("{:.1}", r.technique_ms),
@@ -162,14 +165,17 @@ fn show(results: &std::path::Path) -> anyhow::Result<()> {
             })
             .collect();
         print_table(&header, &rows);
-        // Equal time: each technique's error at the fastest technique's time at each budget.
+        // Equal time: each technique's error at the cheapest technique's cost at each budget.
         let mut points: Vec<&At> = at_time.cells.iter().filter(|c| c.scene == scene).map(|c| &c.at).collect();
         points.dedup();
         if points.is_empty() {
             continue;
         }
-        println!("\n{scene} at equal time (error read off each technique's curve at the fastest one's time)");
-        let mut header = vec!["time ms".to_string(), "fastest".into(), "technique".into()];
+        println!(
+            "\n{scene} at equal time (each technique's error at the cheapest one's cost: at a budget of its own \
+             whose cost is the same within the noise, or read off its curve)"
+        );
+        let mut header = vec!["cost ms".to_string(), "cheapest".into(), "technique".into()];
         header.extend(metrics.iter().map(|m| format!("{m} {}", arrow(m))));
         let mut rows = Vec::new();
         for at in points {
@@ -186,10 +192,13 @@ fn show(results: &std::path::Path) -> anyhow::Result<()> {
                         .iter()
                         .find(|c| c.metric == *m)
                         .and_then(|c| c.places.iter().find(|p| p.technique == technique));
+                    let tie = |p: &fbksd_exchange::ranking::Place| if p.tied_with.is_empty() { "" } else { " =" };
                     match place {
-                        Some(p) if p.tied_with.is_empty() => format!("{:.6} (#{})", p.mean, p.place),
-                        Some(p) => format!("{:.6} (#{} =)", p.mean, p.place),
-                        None => "— (too slow)".into(),
+                        Some(p) => match p.spp {
+                            Some(spp) => format!("{:.6} (#{}{}, its {spp} spp)", p.mean, p.place, tie(p)),
+                            None => format!("{:.6} (#{}{})", p.mean, p.place, tie(p)),
+                        },
+                        None => "— (costs more)".into(),
                     }
                 }));
                 rows.push(row);

@@ -12,6 +12,7 @@
 //! - [`scenes`]: scene metadata, scene digests and the reference-cache rule.
 //! - [`technique`]: a technique repository's `info.json`.
 //! - [`environments`]: what each environment a technique builds in holds.
+//! - [`cost`]: what a run costs on the equal-time axis.
 //! - [`stats`]: intervals and spreads over a run's repeats, the paired test.
 //! - [`ranking`]: techniques ranked by mean rank over the index, at equal
 //!   samples and at equal time, with ties where differences are noise.
@@ -20,6 +21,7 @@
 //! - [`viewer`]: the results viewer's document.
 #![deny(missing_docs)]
 
+pub mod cost;
 pub mod environments;
 pub mod pixels;
 pub mod ranking;

@@ -13,18 +13,26 @@
 //!   a missing value counting as last. That fixes the original, where a
 //!   missing result was simply not ranked, which favoured incomplete
 //!   techniques.
-//! - **Equal time**: a scene's time points are, at each budget of its
-//!   sweep, the time to the result of the fastest technique at that budget.
-//!   Each technique's error at a time point is read off its own
-//!   error-against-time curve (its budgets, linear in log–log between the
-//!   two budgets around the time point), seed by seed, never extrapolated:
-//!   a technique whose smallest budget already takes longer has no value
-//!   there, and ranks last, because it cannot give a result in that time.
+//! - **Equal time**: the time axis is each run's cost ([`crate::cost`]:
+//!   the technique's CPU time, start-up excluded, and its samples at the
+//!   scene's render rate). A scene's time points are, at each budget of its
+//!   sweep, the cost of the cheapest technique at that budget, with its cost
+//!   by seed (the point's noise). A technique whose cost at one of its
+//!   budgets cannot be told apart from the point's ([`stats::same_cost`])
+//!   is given that budget's result there: the same program under two names
+//!   ties at equal time as it does at equal samples. Otherwise its error is
+//!   read off its own error-against-cost curve (linear in log–log between
+//!   the two budgets around the point), seed by seed, never extrapolated: a
+//!   technique whose smallest budget costs more, beyond the noise, has no
+//!   value there and ranks last, because it cannot give a result for that
+//!   cost.
 //!
 //! [`stats::differ`]: crate::stats::differ
+//! [`stats::same_cost`]: crate::stats::same_cost
 
+use crate::cost::Costs;
 use crate::results::IndexEntry;
-use crate::stats::{differ, mean, Samples};
+use crate::stats::{differ, mean, same_cost, Samples};
 use crate::RunStatus;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -79,6 +87,11 @@ pub struct Place {
     /// The techniques it ties with.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tied_with: Vec<String>,
+    /// At equal time: the budget whose result the value is, when that
+    /// budget's time is the time point's within the noise (absent when the
+    /// value is read between two budgets).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spp: Option<u64>,
 }
 
 /// One scene and metric at one budget or time point.
@@ -132,52 +145,106 @@ pub fn equal_spp(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) ->
 }
 
 /// The ranking at equal time: a cell per (scene, time point, metric); see
-/// the module's documentation for the time points and the interpolation.
+/// the module's documentation for the time points and how each
+/// technique's value at one is found.
 pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -> Ranking {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
-    let mut by_scene: BTreeMap<&str, Vec<&IndexEntry>> = BTreeMap::new();
-    for r in runs.iter().filter(|r| r.status == RunStatus::Ok && r.time() > 0.0 && r.time().is_finite()) {
-        by_scene.entry(&r.scene).or_default().push(r);
+    let costs = Costs::of(runs);
+    let mut by_scene: BTreeMap<&str, Vec<Timed>> = BTreeMap::new();
+    for run in runs.iter().filter(|r| r.status == RunStatus::Ok) {
+        let timed = Timed { run, ms: costs.of_run(run), by_seed: costs.by_seed(run) };
+        if timed.ms > 0.0 && timed.ms.is_finite() {
+            by_scene.entry(&run.scene).or_default().push(timed);
+        }
     }
     let mut cells = Vec::new();
     for (scene, mut entries) in by_scene {
-        entries.sort_by_key(|r| r.spp);
-        let points = time_points(&entries);
-        let metrics: BTreeSet<&str> = entries.iter().flat_map(|r| r.metrics.keys().map(String::as_str)).collect();
-        // Each technique's curve per metric, in budget order, made once for every time point.
-        let curves: BTreeMap<&str, Vec<(&str, Curve)>> = metrics
-            .iter()
-            .map(|&metric| {
-                let curve = |t: &str| -> Curve {
-                    entries.iter().filter(|r| r.technique == t).map(|r| (r.time(), r.samples(metric))).collect()
-                };
-                (metric, techniques.iter().map(|t| (*t, curve(t))).collect())
-            })
-            .collect();
-        for &(ms, fastest, spp) in &points {
-            for (&metric, curves) in &curves {
-                let values = curves.iter().filter_map(|(t, curve)| Some((*t, interpolate(curve, ms)?))).collect();
-                let at = At::Time { ms, fastest: fastest.to_string(), spp };
-                cells.push(place(scene, metric, at, values, &techniques, lower_is_better(metric)));
+        entries.sort_by_key(|t| t.run.spp);
+        let metrics: BTreeSet<&str> = entries.iter().flat_map(|t| t.run.metrics.keys().map(String::as_str)).collect();
+        let budgets: Vec<(&str, Vec<&Timed>)> =
+            techniques.iter().map(|t| (*t, entries.iter().filter(|e| e.run.technique == *t).collect())).collect();
+        for point in time_points(&entries) {
+            // Where each technique's value at this point comes from, the same for every metric.
+            let sources: Vec<(&str, Source)> =
+                budgets.iter().filter_map(|(t, runs)| Some((*t, source(runs, point)?))).collect();
+            for &metric in &metrics {
+                let values: Vec<(&str, Samples, Option<u64>)> = sources
+                    .iter()
+                    .filter_map(|(t, source)| {
+                        Some(match source {
+                            Source::Budget(r) => (*t, r.run.samples(metric), Some(r.run.spp)),
+                            Source::Between(runs) => {
+                                let curve: Curve = runs.iter().map(|r| (r.ms, r.run.samples(metric))).collect();
+                                (*t, interpolate(&curve, point.ms)?, None)
+                            }
+                        })
+                    })
+                    .collect();
+                let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
+                let mut cell = place(
+                    scene,
+                    metric,
+                    at,
+                    values.iter().map(|(t, s, _)| (*t, s.clone())).collect(),
+                    &techniques,
+                    lower_is_better(metric),
+                );
+                for p in &mut cell.places {
+                    p.spp = values.iter().find(|(t, ..)| *t == p.technique).and_then(|(.., spp)| *spp);
+                }
+                cells.push(cell);
             }
         }
     }
     standings(&techniques, cells)
 }
 
-/// A technique's error-against-time curve: (time to result, values by seed), in budget order.
+/// A technique's error-against-cost curve: (cost, values by seed), in budget order.
 type Curve = Vec<(f64, Samples)>;
 
-/// A scene's time points: at each budget, the fastest technique's time.
-fn time_points<'a>(entries: &[&'a IndexEntry]) -> Vec<(f64, &'a str, u64)> {
-    let mut fastest: BTreeMap<u64, &IndexEntry> = BTreeMap::new();
-    for r in entries {
-        let best = fastest.entry(r.spp).or_insert(r);
-        if r.time() < best.time() {
-            *best = r;
+/// A run with its cost ([`Costs`]): the median, and by seed (its noise).
+struct Timed<'a> {
+    run: &'a IndexEntry,
+    ms: f64,
+    by_seed: Samples,
+}
+
+/// A scene's time points: at each budget, the cheapest technique's run.
+fn time_points<'a, 'b>(entries: &'b [Timed<'a>]) -> Vec<&'b Timed<'a>> {
+    let mut cheapest: BTreeMap<u64, &Timed> = BTreeMap::new();
+    for t in entries {
+        let best = cheapest.entry(t.run.spp).or_insert(t);
+        if t.ms < best.ms {
+            *best = t;
         }
     }
-    fastest.into_values().map(|r| (r.time(), r.technique.as_str(), r.spp)).collect()
+    cheapest.into_values().collect()
+}
+
+/// Where a technique's value at a time point comes from.
+enum Source<'a, 'b> {
+    /// The result of a budget whose cost is the point's within the noise.
+    Budget(&'b Timed<'a>),
+    /// Its curve between the two budgets around the point (its runs, in budget order).
+    Between(&'b [&'b Timed<'a>]),
+}
+
+/// Where the value of a technique with these runs (in budget order) at
+/// `point` comes from: a budget whose cost cannot be told apart from the
+/// point's ([`same_cost`]; the nearest, if several), else its curve, when
+/// the point lies within it; `None` when it lies beyond the noise outside
+/// the curve (never extrapolated).
+fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed) -> Option<Source<'a, 'b>> {
+    let distance = |t: &Timed| (t.ms / point.ms).ln().abs();
+    let nearest = runs
+        .iter()
+        .filter(|t| same_cost(&t.by_seed, &point.by_seed))
+        .min_by(|a, b| distance(a).total_cmp(&distance(b)));
+    if let Some(t) = nearest {
+        return Some(Source::Budget(t));
+    }
+    let (first, last) = (runs.first()?.ms, runs.last()?.ms);
+    (first.min(last) < point.ms && point.ms < first.max(last)).then_some(Source::Between(runs))
 }
 
 /// The value of a technique's curve (time, values by seed; in budget
@@ -234,6 +301,7 @@ fn place(scene: &str, metric: &str, at: At, values: Vec<CellValues>, techniques:
                 seeds: values[i].1.len(),
                 place: 1.0 + ahead as f64 + tied_with.len() as f64 / 2.0,
                 tied_with,
+                spp: None,
             }
         })
         .collect();
@@ -314,6 +382,10 @@ mod tests {
                 wall_ms: time_ms,
                 cpu_ms: 0.0,
                 waiting_ms: time_ms / 2.0,
+                technique_cpu_ms: 0.0,
+                render_cpu_ms: 0.0,
+                sample_floats: 0,
+                startup_ms: 0.0,
                 peak_memory_bytes: 0,
                 used_samples: 0,
                 metrics: [("MSE".to_string(), *v)].into(),
@@ -443,5 +515,105 @@ mod tests {
         let first = time.cells.iter().find(|c| matches!(c.at, At::Time { ms, .. } if ms == 1.0)).unwrap();
         assert_eq!(first.missing, ["denoiser"]);
         assert!((time.standings[0].mean_rank - (2.0 + 1.0 + 1.0 + 1.0) / 4.0).abs() < 1e-12);
+    }
+
+    /// A run whose seeds cost `costs` (ms, measured CPU times) with these MSEs.
+    fn costly(t: &str, scene: &str, spp: u64, mse: &[f64], costs: &[f64]) -> IndexEntry {
+        let mut e = repeated(t, scene, spp, mse, 1.0);
+        for (r, cost) in e.repeats.iter_mut().zip(costs) {
+            // The render rate is pooled (1 µs per sample here), so the technique's CPU carries the differences.
+            r.used_samples = spp * 1000;
+            r.render_cpu_ms = spp as f64;
+            r.technique_cpu_ms = cost - spp as f64;
+        }
+        e.summarize();
+        e
+    }
+
+    #[test]
+    fn the_same_program_twice_ties_at_equal_time_whatever_its_times() {
+        // Bit-equal values; costs that differ by noise (b is "faster" at 4 spp, a at 16).
+        let mut runs = Vec::new();
+        for (name, c4, c16) in [("a", [9.0, 9.6, 9.3], [33.0, 33.4, 32.8]), ("b", [8.8, 9.2, 9.5], [33.6, 33.1, 33.5])]
+        {
+            runs.push(costly(name, "s", 4, &[0.4, 0.5, 0.45], &c4));
+            runs.push(costly(name, "s", 16, &[0.1, 0.12, 0.11], &c16));
+        }
+        let time = equal_time(&runs, |_| true);
+        assert_eq!(time.cells.len(), 2);
+        for cell in &time.cells {
+            assert!(cell.places.iter().all(|p| p.place == 1.5), "{cell:?}");
+            // Each read at its own budget, never between budgets.
+            assert!(cell.places.iter().all(|p| Some(p.spp) == Some(cell.places[0].spp) && p.spp.is_some()), "{cell:?}");
+        }
+        assert_eq!(time.standings[0].mean_rank, time.standings[1].mean_rank);
+    }
+
+    #[test]
+    fn doubled_work_ranks_below_at_equal_time() {
+        let mut runs = Vec::new();
+        for (name, extra) in [("plain", 0.0), ("doubled", 6.0)] {
+            runs.push(costly(name, "s", 4, &[0.4, 0.5, 0.45], &[10.0 + extra, 10.2 + extra, 9.9 + extra]));
+            runs.push(costly(
+                name,
+                "s",
+                16,
+                &[0.1, 0.12, 0.11],
+                &[40.0 + 4.0 * extra, 40.5 + 4.0 * extra, 39.8 + 4.0 * extra],
+            ));
+        }
+        let time = equal_time(&runs, |_| true);
+        // At plain's 4 spp cost, doubled has no result; at its 16 spp cost, doubled's is read between its budgets.
+        assert_eq!(time.cells[0].missing, ["doubled"]);
+        let second = &time.cells[1];
+        assert_eq!((second.places[0].technique.as_str(), second.places[0].place), ("plain", 1.0));
+        assert_eq!(second.places[1].spp, None);
+        assert_eq!(time.standings[0].technique, "plain");
+        // At equal samples they are the same program.
+        assert!(equal_spp(&runs, |_| true).cells.iter().all(|c| c.places.iter().all(|p| p.place == 1.5)));
+    }
+
+    #[test]
+    fn messy_results_rank_alike_at_equal_samples_and_at_equal_time() {
+        let mut runs = vec![
+            // Non-positive values (a metric that can go negative): read linearly, never dropped.
+            costly("signed", "s", 4, &[-0.2, 0.0, -0.1], &[10.0, 10.1, 9.9]),
+            costly("signed", "s", 16, &[-0.4, -0.3, -0.35], &[40.0, 40.2, 39.9]),
+            costly("steady", "s", 4, &[0.5, 0.6, 0.55], &[10.0, 10.2, 9.8]),
+            costly("steady", "s", 16, &[0.2, 0.25, 0.22], &[40.1, 40.0, 40.3]),
+            // Seeds that differ between budgets: nothing to pair, so nothing read between them.
+            costly("reseeded", "s", 4, &[0.5, 0.6, 0.55], &[20.0, 20.1, 20.2]),
+        ];
+        let mut reseeded16 = costly("reseeded", "s", 16, &[0.2, 0.25, 0.22], &[80.0, 80.2, 80.1]);
+        reseeded16.repeats.iter_mut().for_each(|r| r.seed += 10);
+        reseeded16.summarize();
+        runs.push(reseeded16);
+        // A metric missing on one repeat: no value for the run, at equal samples and at equal time.
+        let mut holey = costly("holey", "s", 4, &[0.01, 0.01, 0.01], &[10.0, 10.1, 10.0]);
+        holey.repeats[1].metrics.clear();
+        holey.summarize();
+        runs.push(holey);
+        runs.push(costly("holey", "s", 16, &[0.001, 0.001, 0.001], &[40.0, 40.1, 40.2]));
+
+        let spp = equal_spp(&runs, |_| true);
+        let time = equal_time(&runs, |_| true);
+        let at = |r: &Ranking, spp4: bool| {
+            r.cells
+                .iter()
+                .find(|c| matches!(c.at, At::Spp { spp: 4 } | At::Time { spp: 4, .. }) == spp4)
+                .unwrap()
+                .clone()
+        };
+        for ranking in [&spp, &time] {
+            let first = at(ranking, true);
+            assert!(first.missing.contains(&"holey".to_string()), "{first:?}");
+            assert_eq!(first.places[0].technique, "signed", "negative values still rank: {first:?}");
+        }
+        // At the 16 spp point (40 ms), reseeded's 4 spp (20 ms) and 16 spp (80 ms) share no seed.
+        let last = at(&time, false);
+        assert!(last.missing.contains(&"reseeded".to_string()), "{last:?}");
+        // Holey's 16 spp run lacks nothing: it ranks there, behind the negative values.
+        let order: Vec<&str> = last.places.iter().map(|p| p.technique.as_str()).collect();
+        assert_eq!(order, ["signed", "holey", "steady"]);
     }
 }

@@ -111,14 +111,22 @@ impl fmt::Display for RunStatus {
 
 /// Times of one run, in milliseconds.
 ///
-/// `technique` is the honest one: wall time from starting the technique to
-/// its result, minus the time it spent waiting for the renderer (inside a
-/// request with no tile in its hands, or while the renderer accepts its
-/// layout), plus the CPU time it used while waiting (`background_cpu_ms`).
-/// Start-up is included (loading a model is part of a technique's cost) and
-/// also reported alone. `technique_ms + waiting_ms − background_cpu_ms` is
-/// the wall time: what the result cost, renderer included, which is the
-/// time of the equal-time comparison.
+/// **CPU times** (`technique_cpu_ms`, `render_cpu_ms`) are what the
+/// equal-time comparison charges ([`crate::cost`]): the CPU time of the
+/// technique (every thread of every process it started) and of the
+/// renderer, from the technique's first protocol message (its hello) to its
+/// result. What came before the hello (process start, imports, loading a
+/// model) is start-up (`startup_ms`), shown but not charged: nothing
+/// scene-dependent is known before the hello, so nothing can be gained by
+/// working earlier.
+///
+/// Beside them, the wall-clock times as the original measured them:
+/// `technique` is wall time from starting the technique to its result,
+/// minus the time it spent waiting for the renderer (inside a request with
+/// no tile in its hands, or while the renderer accepts its layout), plus
+/// the CPU time it used while waiting (`background_cpu_ms`); start-up is
+/// included. `technique_ms + waiting_ms − background_cpu_ms` is the wall
+/// time.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Times {
     /// Technique time: `wall − waiting`.
@@ -138,8 +146,15 @@ pub struct Times {
     pub wall_ms: f64,
     /// Start of the technique process → its hello.
     pub startup_ms: f64,
-    /// User + system CPU time of the technique process.
+    /// User + system CPU time of the technique process, start-up included.
     pub cpu_ms: f64,
+    /// CPU time of the technique, every thread and process, hello → result.
+    #[serde(default)]
+    pub technique_cpu_ms: f64,
+    /// CPU time of the renderer over the same span (0 where the CPU times
+    /// could not be read, e.g. for a technique started by hand).
+    #[serde(default)]
+    pub render_cpu_ms: f64,
 }
 
 /// Everything recorded about one run; written as `<spp>_0_log.json`.
@@ -156,6 +171,10 @@ pub struct RunRecord {
     pub samples_budget: u64,
     /// Samples delivered to the technique.
     pub used_samples: u64,
+    /// Floats per sample of the technique's layout (0 when it set none):
+    /// the renderer's cost per sample depends on it.
+    #[serde(default)]
+    pub sample_floats: u32,
     /// Whether the run ended without a valid result.
     pub aborted: bool,
     /// Technique time in milliseconds (see [`Times`]).

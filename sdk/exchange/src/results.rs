@@ -138,11 +138,19 @@ pub struct IndexEntry {
     #[serde(default)]
     pub waiting_ms: f64,
     /// Time to the result in ms: the technique's time plus the time it
-    /// waited for the renderer to render the samples it asked for (the
-    /// time axis of the equal-time comparison); 0 in older indexes, where
-    /// [`IndexEntry::time`] falls back to the wall time.
+    /// waited for the renderer to render the samples it asked for (wall
+    /// time); 0 in older indexes, where [`IndexEntry::time`] falls back to
+    /// the wall time.
     #[serde(default)]
     pub time_ms: f64,
+    /// The technique's CPU time in ms, every thread and process, from its
+    /// hello to its result (see [`crate::record::Times`]); 0 where it was
+    /// not measured.
+    #[serde(default)]
+    pub technique_cpu_ms: f64,
+    /// Start-up in ms (technique start → its hello), shown, not charged.
+    #[serde(default)]
+    pub startup_ms: f64,
     /// Each metric's 95 % confidence interval over the repeats.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub intervals: BTreeMap<String, Interval>,
@@ -180,6 +188,19 @@ pub struct Repeat {
     pub cpu_ms: f64,
     /// Time the technique waited for the renderer, in ms.
     pub waiting_ms: f64,
+    /// The technique's CPU time in ms, every thread and process, from its
+    /// hello to its result; 0 where not measured.
+    #[serde(default)]
+    pub technique_cpu_ms: f64,
+    /// The renderer's CPU time over the same span; 0 where not measured.
+    #[serde(default)]
+    pub render_cpu_ms: f64,
+    /// Floats per sample of the technique's layout (0 where not recorded).
+    #[serde(default)]
+    pub sample_floats: u32,
+    /// Start-up in ms (technique start → its hello).
+    #[serde(default)]
+    pub startup_ms: f64,
     /// Peak resident memory of the technique in bytes.
     pub peak_memory_bytes: u64,
     /// Samples used.
@@ -207,6 +228,9 @@ pub struct Timing {
     pub render: Spread,
     /// CPU time of the technique.
     pub cpu: Spread,
+    /// The technique's CPU time, hello → result (absent in older results).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub technique_cpu: Option<Spread>,
 }
 
 impl IndexEntry {
@@ -229,14 +253,18 @@ impl IndexEntry {
             metrics: BTreeMap::new(),
             waiting_ms: 0.0,
             time_ms: 0.0,
+            technique_cpu_ms: 0.0,
+            startup_ms: 0.0,
             intervals: BTreeMap::new(),
             timing: None,
             repeats: Vec::new(),
         }
     }
 
-    /// Time to the result in ms: [`IndexEntry::time_ms`], or in older
-    /// indexes the wall time (or technique + render time before that).
+    /// Wall time to the result in ms: [`IndexEntry::time_ms`], or in older
+    /// indexes the wall time (or technique + render time before that). The
+    /// equal-time axis is the cost ([`crate::cost`]), which falls back to
+    /// this where CPU times were not recorded.
     pub fn time(&self) -> f64 {
         if self.time_ms > 0.0 {
             self.time_ms
@@ -264,6 +292,10 @@ impl IndexEntry {
             wall_ms: self.wall_ms,
             cpu_ms: self.cpu_ms,
             waiting_ms: (self.wall_ms - self.technique_ms).max(0.0),
+            technique_cpu_ms: self.technique_cpu_ms,
+            render_cpu_ms: 0.0,
+            sample_floats: 0,
+            startup_ms: self.startup_ms,
             peak_memory_bytes: self.peak_memory_bytes,
             used_samples: self.used_samples,
             metrics: self.metrics.clone(),
@@ -271,9 +303,15 @@ impl IndexEntry {
         self.summarize();
     }
 
-    /// The value of `metric` for each sample seed: one per `ok` repeat that
-    /// has it (the entry's own value, seed 0, in indexes without repeats).
+    /// The value of `metric` for each sample seed: one per `ok` repeat (the
+    /// entry's own value, seed 0, in indexes without repeats); none at all
+    /// when the run has no value for it ([`IndexEntry::summarize`]: some
+    /// repeat failed, or lacks the metric), so that a run ranks the same way
+    /// at equal samples and at equal time.
     pub fn samples(&self, metric: &str) -> Samples {
+        if !self.metrics.contains_key(metric) {
+            return Samples::new();
+        }
         if self.repeats.is_empty() {
             return self.metrics.get(metric).map(|v| (0, *v)).into_iter().collect();
         }
@@ -312,6 +350,7 @@ impl IndexEntry {
             time: spread(&|r| r.time_ms()),
             render: spread(&|r| r.render_ms),
             cpu: spread(&|r| r.cpu_ms),
+            technique_cpu: self.repeats.iter().all(|r| r.render_cpu_ms > 0.0).then(|| spread(&|r| r.technique_cpu_ms)),
         };
         self.technique_ms = timing.technique.median;
         self.time_ms = timing.time.median;
@@ -319,6 +358,8 @@ impl IndexEntry {
         self.cpu_ms = timing.cpu.median;
         self.wall_ms = Spread::of(&column(&|r| r.wall_ms)).map_or(0.0, |s| s.median);
         self.waiting_ms = Spread::of(&column(&|r| r.waiting_ms)).map_or(0.0, |s| s.median);
+        self.technique_cpu_ms = timing.technique_cpu.map_or(0.0, |s| s.median);
+        self.startup_ms = Spread::of(&column(&|r| r.startup_ms)).map_or(0.0, |s| s.median);
         self.peak_memory_bytes = self.repeats.iter().map(|r| r.peak_memory_bytes).max().unwrap_or(0);
         self.used_samples = self.repeats.iter().map(|r| r.used_samples).max().unwrap_or(0);
         self.timing = Some(timing);
@@ -455,6 +496,10 @@ impl ResultsDir {
             wall_ms: record.times.wall_ms,
             cpu_ms: record.times.cpu_ms,
             waiting_ms: record.times.waiting_ms,
+            technique_cpu_ms: record.times.technique_cpu_ms,
+            render_cpu_ms: record.times.render_cpu_ms,
+            sample_floats: record.sample_floats,
+            startup_ms: record.times.startup_ms,
             peak_memory_bytes: record.peak_memory_bytes,
             used_samples: record.used_samples,
             metrics: BTreeMap::new(),

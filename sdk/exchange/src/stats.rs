@@ -15,6 +15,10 @@ use std::collections::BTreeMap;
 /// and must not rank 1st and 2nd).
 pub const ROUNDING_FLOOR: f64 = 1e-6;
 
+/// Below this relative difference two costs are the same whatever their
+/// noise (see [`same_cost`]).
+pub const COST_FLOOR: f64 = 0.02;
+
 /// A metric's mean over the repeats and its 95 % confidence interval
 /// (Student's t); `low == high == mean` for a single repeat.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -94,13 +98,28 @@ pub fn t_quantile_975(df: usize) -> f64 {
         12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
         2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
     ];
+    t_quantile(df, &TABLE, [2.021, 2.000, 1.980, 1.960])
+}
+
+/// The 99.5 % quantile of Student's t with `df` degrees of freedom (two-sided 99 %).
+pub fn t_quantile_995(df: usize) -> f64 {
+    const TABLE: [f64; 30] = [
+        63.657, 9.925, 5.841, 4.604, 4.032, 3.707, 3.499, 3.355, 3.250, 3.169, 3.106, 3.055, 3.012, 2.977, 2.947,
+        2.921, 2.898, 2.878, 2.861, 2.845, 2.831, 2.819, 2.807, 2.797, 2.787, 2.779, 2.771, 2.763, 2.756, 2.750,
+    ];
+    t_quantile(df, &TABLE, [2.704, 2.660, 2.617, 2.576])
+}
+
+/// A quantile of Student's t from its table for 1–30 degrees of freedom
+/// and its values at 40, 60, 120 and infinity (each used up to the next).
+fn t_quantile(df: usize, table: &[f64; 30], beyond: [f64; 4]) -> f64 {
     match df {
         0 => f64::INFINITY,
-        1..=30 => TABLE[df - 1],
-        31..=40 => 2.021,
-        41..=60 => 2.000,
-        61..=120 => 1.980,
-        _ => 1.960,
+        1..=30 => table[df - 1],
+        31..=40 => beyond[0],
+        41..=60 => beyond[1],
+        61..=120 => beyond[2],
+        _ => beyond[3],
     }
 }
 
@@ -136,6 +155,41 @@ pub fn differ(a: &Samples, b: &Samples) -> bool {
     }
     let t = d.abs() / (sd / (diffs.len() as f64).sqrt());
     t > t_quantile_975(diffs.len() - 1)
+}
+
+/// Whether two runs' costs (by sample seed) cannot be told apart: their
+/// medians differ by at most [`COST_FLOOR`] (relative), or the paired
+/// t-test over the log-ratios of the seeds they share does not reject "the
+/// same cost" at the 1 % level. Costs pair by seed because the manager runs
+/// one seed of every technique back to back: a machine whose speed drifts
+/// moves both alike. 1 % rather than the values' 5 %, because a false
+/// "faster" decides every equal-time cell of the point, where a false
+/// "better" decides one; with one shared seed only the floor ties.
+pub fn same_cost(a: &Samples, b: &Samples) -> bool {
+    let (ma, mb) = (median(a), median(b));
+    if !(ma > 0.0 && mb > 0.0) {
+        return ma == mb;
+    }
+    if (ma / mb).ln().abs() <= COST_FLOOR.ln_1p() {
+        return true;
+    }
+    let ratios: Vec<f64> = a
+        .iter()
+        .filter_map(|(seed, va)| b.get(seed).filter(|vb| *va > 0.0 && **vb > 0.0).map(|vb| (va / vb).ln()))
+        .collect();
+    if ratios.len() < 2 {
+        return false;
+    }
+    let (d, sd) = mean_sd(&ratios);
+    if sd == 0.0 {
+        return false;
+    }
+    d.abs() / (sd / (ratios.len() as f64).sqrt()) <= t_quantile_995(ratios.len() - 1)
+}
+
+/// The median of a cell entry's values (0 for none).
+pub fn median(samples: &Samples) -> f64 {
+    Spread::of(&samples.values().copied().collect::<Vec<_>>()).map_or(0.0, |s| s.median)
 }
 
 #[cfg(test)]
@@ -183,6 +237,24 @@ mod tests {
         // Unpaired, the intervals would overlap completely.
         let (ia, ib) = (Interval::of(&[1.0, 2.0, 0.5, 1.5, 3.0]).unwrap(), Interval::of(&[1.01, 2.02]).unwrap());
         assert!(ia.high > ib.low);
+    }
+
+    #[test]
+    fn costs_tie_within_the_floor_or_the_noise() {
+        // The same program twice: 1 % apart on the median, noisy seeds.
+        assert!(same_cost(&samples(&[100.0, 103.0, 98.0]), &samples(&[101.0, 99.0, 100.5])));
+        // 5 % apart, but the seeds' noise is larger than that.
+        assert!(same_cost(&samples(&[100.0, 130.0, 80.0]), &samples(&[105.0, 90.0, 120.0])));
+        // Twice the work, whatever the noise pattern.
+        assert!(!same_cost(&samples(&[100.0, 103.0, 98.0]), &samples(&[200.0, 199.0, 204.0])));
+        // 10 % apart with 1 % noise: different.
+        assert!(!same_cost(&samples(&[100.0, 101.0, 99.0, 100.5]), &samples(&[110.0, 111.0, 109.5, 110.0])));
+        // One shared seed: only the floor ties.
+        assert!(same_cost(&samples(&[100.0]), &samples(&[101.0])));
+        assert!(!same_cost(&samples(&[100.0]), &samples(&[110.0])));
+        // Nothing measured on both sides is the same; on one side only, not.
+        assert!(same_cost(&Samples::new(), &Samples::new()));
+        assert!(!same_cost(&samples(&[0.0]), &samples(&[10.0])));
     }
 
     #[test]

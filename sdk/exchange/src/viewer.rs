@@ -8,6 +8,7 @@
 //! [`Delivery`]: a page from a server fetches them; a folder opened from
 //! `file://`, where browsers refuse `fetch`, loads them as scripts.
 
+use crate::cost::Costs;
 use crate::ranking::Cell;
 use crate::results::{IndexEntry, MetricInfo, Timing};
 use crate::stats::Interval;
@@ -76,6 +77,22 @@ impl Rankings {
 }
 
 impl ViewerData {
+    /// Sets each run's cost from the index entries of the document's runs
+    /// (their `technique` the technique's key), pooled over all of them as
+    /// the equal-time ranking pools it.
+    pub fn set_costs(&mut self, runs: &[IndexEntry]) {
+        let costs = Costs::of(runs);
+        let by_key: BTreeMap<(&str, &str, u64), &IndexEntry> =
+            runs.iter().map(|e| ((e.technique.as_str(), e.scene.as_str(), e.spp), e)).collect();
+        for technique in &mut self.techniques {
+            for run in &mut technique.runs {
+                if let Some(entry) = by_key.get(&(technique.key.as_str(), run.scene.as_str(), run.spp)) {
+                    run.cost_ms = costs.of_run(entry);
+                }
+            }
+        }
+    }
+
     /// An empty document.
     pub fn new(title: impl Into<String>, delivery: Delivery) -> ViewerData {
         ViewerData {
@@ -165,6 +182,16 @@ pub struct ViewerRun {
     /// The times' spread over the repeats.
     #[serde(default)]
     pub timing: Option<Timing>,
+    /// The run's cost in ms, the equal-time axis ([`crate::cost`]: pooled
+    /// over the document's runs, see [`ViewerData::set_costs`]).
+    #[serde(default)]
+    pub cost_ms: f64,
+    /// The technique's CPU time in ms, hello → result (median).
+    #[serde(default)]
+    pub technique_cpu_ms: f64,
+    /// Start-up in ms, before the technique's hello (median): not charged.
+    #[serde(default)]
+    pub startup_ms: f64,
 }
 
 impl ViewerRun {
@@ -190,6 +217,9 @@ impl ViewerRun {
             seeds: entry.repeats.len().max(1),
             intervals: entry.intervals.clone(),
             timing: entry.timing,
+            cost_ms: Costs::of(std::slice::from_ref(entry)).of_run(entry),
+            technique_cpu_ms: entry.technique_cpu_ms,
+            startup_ms: entry.startup_ms,
         }
     }
 }

@@ -5,6 +5,12 @@
 //! technique starts once per (scene, budget, repeat), as in the original
 //! FBKSD. Repeat `k` of a run has the renderer's sample seed `k`, so every
 //! technique sees the same seeds and their values pair up in the ranking.
+//!
+//! Runs are made budget by budget and seed by seed, every technique's run
+//! of one seed back to back, each seed in another order: a machine whose
+//! speed drifts over minutes then moves every technique's cost alike
+//! (costs pair by seed in the equal-time ranking), and no technique always
+//! comes first after a change of budget.
 
 use crate::process::Launcher;
 use crate::scene::{Limits, SceneRunner, TechniqueLaunch};
@@ -77,6 +83,13 @@ pub struct Benchmark {
     pub repeats: u32,
 }
 
+/// The order of the techniques' runs of repeat `repeat`: rotated by one
+/// each repeat.
+fn run_order(techniques: usize, repeat: u32) -> impl Iterator<Item = usize> {
+    let shift = repeat as usize % techniques.max(1);
+    (0..techniques).map(move |i| (i + shift) % techniques)
+}
+
 impl Benchmark {
     /// Runs everything, writing results as each run ends.
     pub fn run(&self, mut progress: impl FnMut(Progress<'_>) + Send) -> io::Result<Vec<RunRecord>> {
@@ -87,17 +100,20 @@ impl Benchmark {
             let renderer_log = results.renderer_log(&scene_name)?;
             let mut runner = SceneRunner::new(scene.renderer_argv.clone(), Some(renderer_log), self.limits.clone())?
                 .with_launcher(self.launcher.clone())?;
-            for technique in &self.techniques {
-                let technique_name = path_safe_name(&technique.name);
-                let dir = results.run_dir(&technique_name, &scene_name)?;
-                for &spp in &scene.spps {
-                    for repeat in 0..self.repeats.max(1) {
-                        runner.set_seed(repeat as u64);
+            let dirs = self
+                .techniques
+                .iter()
+                .map(|t| results.run_dir(&path_safe_name(&t.name), &scene_name))
+                .collect::<io::Result<Vec<_>>>()?;
+            for &spp in &scene.spps {
+                for repeat in 0..self.repeats.max(1) {
+                    runner.set_seed(repeat as u64);
+                    for i in run_order(self.techniques.len(), repeat) {
                         let record = self.run_once(
                             &mut runner,
                             &results,
-                            &dir,
-                            technique,
+                            &dirs[i],
+                            &self.techniques[i],
                             &scene_name,
                             spp,
                             repeat,
@@ -158,6 +174,7 @@ impl Benchmark {
             spp_budget: spp,
             samples_budget: outcome.samples_budget,
             used_samples: outcome.used_samples,
+            sample_floats: outcome.sample_floats,
             aborted: status != RunStatus::Ok,
             exec_time: outcome.times.technique_ms,
             status,

@@ -86,6 +86,15 @@ pub trait Running: Send {
     fn cpu_clock(&self) -> Option<CpuClock> {
         None
     }
+
+    /// A clock of the CPU time used so far by every thread of every process
+    /// it started (its process group here, its container's cgroup in a
+    /// sandbox): the run's cost is read off it, so work handed to a helper
+    /// thread or a child process is charged. It may take a few milliseconds
+    /// to read; the manager reads it twice a run.
+    fn tree_cpu_clock(&self) -> Option<CpuClock> {
+        self.cpu_clock()
+    }
 }
 
 /// Reads a running process's CPU time so far (`None` once it is gone).
@@ -127,18 +136,78 @@ impl Running for Supervised {
     }
 
     fn cpu_clock(&self) -> Option<CpuClock> {
-        let mut clock: libc::clockid_t = 0;
-        // SAFETY: clock_getcpuclockid writes one clockid_t.
-        if unsafe { libc::clock_getcpuclockid(self.pid, &mut clock) } != 0 {
-            return None;
-        }
-        Some(Box::new(move || {
-            let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-            // SAFETY: clock_gettime writes one timespec; a dead process's clock fails cleanly.
-            (unsafe { libc::clock_gettime(clock, &mut ts) } == 0)
-                .then(|| std::time::Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32))
-        }))
+        let pid = self.pid;
+        process_cpu(pid)?;
+        Some(Box::new(move || process_cpu(pid)))
     }
+
+    fn tree_cpu_clock(&self) -> Option<CpuClock> {
+        let group = self.pid;
+        process_group_cpu(group)?;
+        Some(Box::new(move || process_group_cpu(group)))
+    }
+}
+
+/// The CPU time so far of every process in the process group `group`: each
+/// member's own clock (all its threads, to the nanosecond) plus what the
+/// children it reaped used (the kernel keeps those in clock ticks). A member
+/// that has exited but is not yet reaped counts by its ticks. `None` when
+/// the group has no member left.
+///
+/// A process that leaves the group (`setsid`) is not seen; the service's
+/// runner reads the container's cgroup instead, which nothing escapes.
+pub fn process_group_cpu(group: i32) -> Option<Duration> {
+    // SAFETY: sysconf has no preconditions.
+    let ticks_per_second = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
+    let ticks = |n: u64| Duration::from_secs_f64(n as f64 / ticks_per_second);
+    let mut total = Duration::ZERO;
+    let mut members = 0;
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Some(pid) = entry.file_name().to_str().and_then(|n| n.parse::<i32>().ok()) else { continue };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else { continue };
+        let Some(stat) = ProcStat::parse(&stat) else { continue };
+        if stat.group != group {
+            continue;
+        }
+        members += 1;
+        let own = if stat.zombie { None } else { process_cpu(pid) };
+        total += own.unwrap_or_else(|| ticks(stat.ticks)) + ticks(stat.children_ticks);
+    }
+    (members > 0).then_some(total)
+}
+
+/// What `/proc/<pid>/stat` says that [`process_group_cpu`] needs.
+#[derive(Debug, PartialEq)]
+struct ProcStat {
+    group: i32,
+    zombie: bool,
+    /// User + system time, in clock ticks.
+    ticks: u64,
+    /// User + system time of the reaped children, in clock ticks.
+    children_ticks: u64,
+}
+
+impl ProcStat {
+    fn parse(stat: &str) -> Option<ProcStat> {
+        // The command name may hold spaces and parentheses: fields start after the last ')'.
+        let fields: Vec<&str> = stat[stat.rfind(')')? + 1..].split_whitespace().collect();
+        let number = |i: usize| fields.get(i)?.parse::<u64>().ok();
+        Some(ProcStat {
+            zombie: *fields.first()? == "Z",
+            group: fields.get(2)?.parse().ok()?,
+            ticks: number(11)? + number(12)?,
+            children_ticks: number(13)? + number(14)?,
+        })
+    }
+}
+
+/// A process's CPU clock (all its threads), read once; `None` once it is gone.
+fn process_cpu(pid: i32) -> Option<Duration> {
+    let mut clock: libc::clockid_t = 0;
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: each call writes one plain value; a vanished process fails cleanly.
+    let ok = unsafe { libc::clock_getcpuclockid(pid, &mut clock) == 0 && libc::clock_gettime(clock, &mut ts) == 0 };
+    ok.then(|| Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32))
 }
 
 /// A human description of an exit status.
@@ -286,4 +355,43 @@ pub fn self_peak_rss() -> u64 {
         .find_map(|l| l.strip_prefix("VmHWM:"))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
         .map_or(0, |kb| kb * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn proc_stat_fields_follow_the_last_parenthesis() {
+        let line = "4242 (a (b) c) S 1 4200 4200 0 -1 4194560 100 0 0 0 7 3 20 5 20 0 1 0 100 0 0";
+        assert_eq!(ProcStat::parse(line), Some(ProcStat { group: 4200, zombie: false, ticks: 10, children_ticks: 25 }));
+        assert_eq!(ProcStat::parse("1 (x) Z 0 9 9 0 -1 0 0 0 0 0 1 1 0 0").map(|s| s.zombie), Some(true));
+        assert_eq!(ProcStat::parse("garbage"), None);
+    }
+
+    /// A child's burn, and a grandchild's that the child reaped, both count.
+    #[test]
+    fn a_process_group_is_charged_for_its_children() {
+        let dir = tempfile::tempdir().unwrap();
+        let done = dir.path().join("done");
+        let path = std::ffi::CString::new(done.to_str().unwrap()).unwrap();
+        // SAFETY: a valid C string.
+        assert_eq!(unsafe { libc::mkfifo(path.as_ptr(), 0o600) }, 0);
+        let burn = "i=0; while [ $i -lt 60000 ]; do i=$((i+1)); done";
+        let script = format!("sh -c '{burn}'; {burn}; echo done > {}; sleep 30", done.display());
+        let (tx, rx) = std::sync::mpsc::channel();
+        let child =
+            Supervised::spawn(&["sh".into(), "-c".into(), script], &[], None, move |info| tx.send(info).unwrap())
+                .unwrap();
+        let clock = child.tree_cpu_clock().expect("the group is readable");
+        let own = child.cpu_clock().expect("the leader is readable");
+        // Opening the FIFO returns once both burns are done.
+        std::fs::read_to_string(&done).unwrap();
+        let (tree, leader) = (clock().unwrap(), own().unwrap());
+        child.kill();
+        rx.recv().unwrap();
+        // The grandchild's burn is as long as the leader's own.
+        assert!(tree.as_secs_f64() > 1.5 * leader.as_secs_f64(), "group {tree:?}, leader alone {leader:?}");
+        assert!(leader > Duration::from_millis(20), "the leader burned: {leader:?}");
+    }
 }

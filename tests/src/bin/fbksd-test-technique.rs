@@ -68,6 +68,17 @@ fn main() -> anyhow::Result<()> {
         "idle-while-waiting" => waits_for_samples(None),
         "burn-while-waiting" => waits_for_samples(Some(Work::Burn)),
         "sleep-before-request" => waits_for_samples(Some(Work::SleepFirst)),
+        "burn-in-child" => waits_for_samples(Some(Work::Child)),
+        "burn-before-hello" => {
+            burn_a_second();
+            waits_for_samples(None)
+        }
+        "burn-cpu" => {
+            burn_a_second();
+            Ok(())
+        }
+        "box-filter" => box_filter(false, extra_work()?),
+        "box-filter-doubled" => box_filter(true, extra_work()?),
         other => bail!("unknown mode {other:?}"),
     }
 }
@@ -78,6 +89,77 @@ enum Work {
     Burn,
     /// Sleeps a second before its request.
     SleepFirst,
+    /// Runs a child process that burns a second of CPU, and waits for it.
+    Child,
+}
+
+/// Burns a second of this thread's CPU (not of wall time: on a busy machine
+/// the burn takes longer, and the charge must still be a second).
+fn burn_a_second() -> u64 {
+    let mut x = 1u64;
+    while thread_cpu_seconds() < 1.0 {
+        for _ in 0..100_000 {
+            x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+        }
+    }
+    x
+}
+
+/// The box filters' optional second argument: rounds of arithmetic on each
+/// sample, to give the technique weight beside the renderer (0 by default).
+fn extra_work() -> anyhow::Result<u32> {
+    std::env::args().nth(2).map_or(Ok(0), |n| n.parse().context("box-filter [rounds of work per sample]"))
+}
+
+/// A box filter (each pixel the mean of its samples) that also does
+/// `rounds` of arithmetic per sample; `doubled`, the same program with a
+/// busy loop that doubles its work: before sending its result it burns as
+/// much CPU again as it has used since its hello.
+fn box_filter(doubled: bool, rounds: u32) -> anyhow::Result<()> {
+    let mut client = BenchmarkClient::connect()?;
+    let since_hello = process_cpu_seconds();
+    let width = client.scene_info().get::<i64>("width")? as usize;
+    let spp = client.scene_info().get::<i64>("max_spp")? as u64;
+    client.set_sample_layout(&SampleLayout::new().with("COLOR_R").with("COLOR_G").with("COLOR_B"))?;
+    let mut sums = vec![0f64; client.result_buffer().len()];
+    client.evaluate_samples(Spp(spp), |tile| {
+        for y in tile.begin_y()..tile.end_y() {
+            for x in tile.begin_x()..tile.end_x() {
+                let pixel = (y as usize * width + x as usize) * 3;
+                for s in 0..tile.spp() {
+                    for (c, v) in tile.sample(x, y, s)[..3].iter().enumerate() {
+                        let mut v = *v as f64;
+                        for _ in 0..rounds {
+                            v = std::hint::black_box(v * 1.0000001 + 1e-12) - 1e-12;
+                        }
+                        sums[pixel + c] += v;
+                    }
+                }
+            }
+        }
+    })?;
+    for (out, sum) in client.result_buffer().iter_mut().zip(&sums) {
+        *out = (sum / spp as f64) as f32;
+    }
+    if doubled {
+        let until = 2.0 * process_cpu_seconds() - since_hello;
+        let mut x = 1u64;
+        while process_cpu_seconds() < until {
+            for _ in 0..1000 {
+                x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+            }
+        }
+    }
+    client.send_result()?;
+    Ok(())
+}
+
+/// CPU time of this process so far, every thread, to the nanosecond.
+fn process_cpu_seconds() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes one timespec.
+    unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
 }
 
 /// CPU time of the calling thread (user + system, from /proc, in 10 ms ticks).
@@ -95,17 +177,15 @@ fn waits_for_samples(work: Option<Work>) -> anyhow::Result<()> {
     let mut client = BenchmarkClient::connect()?;
     client.set_sample_layout(&SampleLayout::new().with("COLOR_R"))?;
     let burner = match work {
-        // A second of this thread's CPU (not of wall time: on a busy machine
-        // the burn takes longer, and the charge must still be a second).
-        Some(Work::Burn) => Some(std::thread::spawn(|| {
-            let mut x = 1u64;
-            while thread_cpu_seconds() < 1.0 {
-                for _ in 0..100_000 {
-                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
-                }
-            }
-            x
-        })),
+        Some(Work::Burn) => Some(std::thread::spawn(burn_a_second)),
+        Some(Work::Child) => {
+            let mut child = std::process::Command::new(std::env::current_exe()?).arg("burn-cpu").spawn()?;
+            Some(std::thread::spawn(move || {
+                let status = child.wait().expect("the child is waited for");
+                assert!(status.success(), "the burning child failed: {status}");
+                0
+            }))
+        }
         Some(Work::SleepFirst) => {
             std::thread::sleep(std::time::Duration::from_secs(1));
             None

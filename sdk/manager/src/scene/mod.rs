@@ -16,7 +16,7 @@ use fbksd_core::protocol::{write_frame, FromRenderer, Hello, Role, ToRenderer, P
 use fbksd_core::scene_info::keys;
 use fbksd_core::{rendezvous, SceneInfo};
 use fbksd_exchange::record::{RunStatus, Times};
-use session::{Session, WaitClock};
+use session::{CostClock, Session, WaitClock};
 use std::collections::VecDeque;
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -84,6 +84,8 @@ pub struct RunOutcome {
     pub samples_budget: u64,
     /// Samples delivered.
     pub used_samples: u64,
+    /// Floats per sample of the technique's layout (0 before it set one).
+    pub sample_floats: u32,
     /// Requests made.
     pub requests: u64,
     /// Times.
@@ -103,6 +105,7 @@ impl Default for RunOutcome {
             height: 0,
             samples_budget: 0,
             used_samples: 0,
+            sample_floats: 0,
             requests: 0,
             times: Times::default(),
             peak_memory_bytes: 0,
@@ -118,6 +121,8 @@ impl RunOutcome {
         s.clock.stop_at(end);
         let waiting = s.clock.waiting;
         let background = s.clock.cpu_while_waiting;
+        s.cost.stop();
+        let (technique_cpu, render_cpu) = s.cost.spent.map_or((0.0, 0.0), |(t, r)| (ms(t), ms(r)));
         self.times = Times {
             technique_ms: ms(wall.saturating_sub(waiting) + background),
             waiting_ms: ms(waiting),
@@ -126,9 +131,12 @@ impl RunOutcome {
             wall_ms: ms(wall),
             startup_ms: s.hello_at.map_or(0.0, |h| ms(h - started)),
             cpu_ms: s.exit.as_ref().map_or(0.0, |e| ms(e.cpu_time)),
+            technique_cpu_ms: technique_cpu,
+            render_cpu_ms: render_cpu,
         };
         self.peak_memory_bytes = s.exit.as_ref().map_or(0, |e| e.peak_rss);
         self.used_samples = s.used + s.active.as_ref().map_or(0, |a| a.delivered);
+        self.sample_floats = s.layout.as_ref().map_or(0, |l| l.sample_size() as u32);
         self.requests = s.requests;
         self.image = s.image.take();
         self.status = status;
@@ -419,6 +427,10 @@ impl SceneRunner {
             queued: VecDeque::new(),
             held: 0,
             clock: WaitClock::new(technique.as_ref().and_then(|t| t.cpu_clock())),
+            cost: CostClock::new(
+                technique.as_ref().and_then(|t| t.tree_cpu_clock()),
+                renderer.process.tree_cpu_clock(),
+            ),
             seed: self.seed,
             render_started: None,
             render_time: Duration::ZERO,

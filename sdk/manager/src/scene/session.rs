@@ -91,6 +91,46 @@ impl WaitClock {
     }
 }
 
+/// The run's cost: the CPU time of the technique (every thread and
+/// process) and of the renderer from the technique's hello to its result
+/// (see `fbksd_exchange::record::Times`). Where either clock cannot be
+/// read, nothing is measured (`spent` stays `None`).
+pub(super) struct CostClock {
+    technique: Option<CpuClock>,
+    renderer: Option<CpuClock>,
+    started: Option<(Option<Duration>, Option<Duration>)>,
+    /// The technique's and the renderer's CPU time, once stopped.
+    pub(super) spent: Option<(Duration, Duration)>,
+}
+
+impl CostClock {
+    pub(super) fn new(technique: Option<CpuClock>, renderer: Option<CpuClock>) -> CostClock {
+        CostClock { technique, renderer, started: None, spent: None }
+    }
+
+    fn read(clock: &Option<CpuClock>) -> Option<Duration> {
+        clock.as_ref().and_then(|c| c())
+    }
+
+    /// Starts at the technique's hello (once).
+    pub(super) fn start(&mut self) {
+        if self.started.is_none() {
+            self.started = Some((Self::read(&self.technique), Self::read(&self.renderer)));
+        }
+    }
+
+    /// Stops at the result, or at the end of a run without one (once).
+    pub(super) fn stop(&mut self) {
+        let Some((Some(technique), Some(renderer))) = self.started else { return };
+        if self.spent.is_some() {
+            return;
+        }
+        if let (Some(t), Some(r)) = (Self::read(&self.technique), Self::read(&self.renderer)) {
+            self.spent = Some((t.saturating_sub(technique), r.saturating_sub(renderer)));
+        }
+    }
+}
+
 /// The state of one technique session.
 pub(super) struct Session {
     /// The token a spawned technique must present (none in debug mode).
@@ -124,6 +164,7 @@ pub(super) struct Session {
     /// Slots in the technique's hands (producing or consuming).
     pub(super) held: usize,
     pub(super) clock: WaitClock,
+    pub(super) cost: CostClock,
     /// The renderer's sample seed for this run.
     pub(super) seed: u64,
     pub(super) render_started: Option<Instant>,
@@ -152,6 +193,8 @@ impl Session {
             return;
         };
         let _ = writer.set_write_timeout(Some(Duration::from_secs(30)));
+        // The cost starts before the welcome: until it arrives the technique can only wait.
+        self.cost.start();
         let _ = write_frame(
             &mut writer,
             &ToTechnique::Welcome {
@@ -309,6 +352,8 @@ impl Session {
                         ),
                     );
                 }
+                // Read before the technique is told its result is accepted: it waits for that answer.
+                self.cost.stop();
                 self.result_at = Some(Instant::now());
                 let mut bytes = vec![0u8; self.width as usize * self.height as usize * 12];
                 if let Err(e) = std::os::unix::fs::FileExt::read_exact_at(result, &mut bytes, 0) {

@@ -17,7 +17,7 @@ struct EntryView {
     /// "= beta, gamma" when it ties by the sort metric, else empty.
     tied: String,
     time: String,
-    time_to_result: String,
+    cost: String,
     image: String,
 }
 
@@ -148,7 +148,7 @@ async fn board_template(
                         Some(cv) => format!("{:.1} ms (CV {:.1} %)", e.technique_ms, cv * 100.0),
                         None => format!("{:.1} ms", e.technique_ms),
                     },
-                    time_to_result: format!("{:.1} ms", e.time_ms),
+                    cost: format!("{:.1} ms", e.cost_ms),
                 })
                 .collect(),
             scene: g.scene.clone(),
