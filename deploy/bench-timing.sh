@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
-# Timing noise: the C++ box filter, NFOR (C++, OpenMP) and NL-means (Python)
-# on the procedural sphere and the Embree Cornell box at 16 spp, each run
-# REPEATS times (default 5) with other sample seeds through `fbksd run`
-# with release binaries; prints, per technique and scene, the median
-# technique time and time to result with their coefficients of variation
-# (markdown, on stdout). The C++ techniques are built as the service
-# builds them (deploy/bench-env.sh).
+# Timing noise: the C++ and the Python box filter, NFOR (C++, OpenMP) and
+# NL-means (Python) on the procedural sphere and the Embree Cornell box at
+# 16 spp, each run REPEATS times (default 5) with other sample seeds through
+# `fbksd run` with release binaries; prints, per technique and scene, the
+# median cost (the equal-time axis, sdk/exchange/src/cost.rs), the
+# technique's CPU time after its hello, its start-up, and the wall times
+# of before (technique time, time to result), each with its coefficient of
+# variation over the seeds (markdown, on stdout). The C++ techniques are
+# built as the service builds them (deploy/bench-env.sh).
 #
 #   [REPEATS=N] bash deploy/bench-timing.sh
 set -euo pipefail
@@ -18,16 +20,30 @@ target/release/fbksd-embree reference scenes/production-small/cornell-box >&2
 box=$(build_technique box-filter-cpp)
 nfor=$(build_technique nfor)
 target/release/fbksd run -t "box-filter-cpp=$box/box-filter-cpp" -t "nfor=$nfor/nfor" \
-    -t "nlm=sdk/techniques/nlm/nlm.py" -s scenes/experimental/sphere -s scenes/production-small/cornell-box \
+    -t "nlm=sdk/techniques/nlm/nlm.py" -t "box-filter-python=sdk/techniques/box-filter-python/box_filter.py" -s scenes/experimental/sphere -s scenes/production-small/cornell-box \
     --spp 16 --repeats "${REPEATS:-5}" --results "$work/results" >&2
 python3 - "$work/results/index.json" <<'PY'
-import json, sys
+import json, statistics as st, sys
 runs = json.load(open(sys.argv[1]))["runs"]
-print("| technique | scene | seeds | technique time (median) | CV | time to result (median) | CV | CPU time CV |")
-print("|---|---|---|---|---|---|---|---|")
+# The cost as the ranking charges it: the technique's CPU time plus its samples
+# at the scene's render rate (the median renderer CPU per sample of every run
+# on the scene with that sample size).
+rates = {}
+for r in runs:
+    for p in r["repeats"]:
+        if p.get("render_cpu_ms", 0) > 0 and p["used_samples"] > 0:
+            rates.setdefault((r["scene"], p["sample_floats"]), []).append(p["render_cpu_ms"] / p["used_samples"])
+rates = {k: st.median(v) for k, v in rates.items()}
+def summary(values):
+    m = st.mean(values)
+    return f"{st.median(values):.1f} ms | {100 * st.stdev(values) / m:.1f} %" if len(values) > 1 and m > 0 else "– | –"
+print("| technique | scene | seeds | cost | CV | technique CPU | CV | start-up | CV | technique time (wall) | CV | time to result (wall) | CV |")
+print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 for r in sorted(runs, key=lambda r: (r["technique"], r["scene"])):
-    t = r["timing"]
-    print(f"| {r['technique']} | {r['scene']} | {len(r['repeats'])} | {t['technique']['median']:.1f} ms | "
-          f"{t['technique']['cv'] * 100:.1f} % | {t['time']['median']:.1f} ms | {t['time']['cv'] * 100:.1f} % | "
-          f"{t['cpu']['cv'] * 100:.1f} % |")
+    ok = [p for p in r["repeats"] if p["status"] == "ok"]
+    cost = [p["technique_cpu_ms"] + rates[(r["scene"], p["sample_floats"])] * p["used_samples"] for p in ok]
+    column = lambda f: summary([f(p) for p in ok])
+    print(f"| {r['technique']} | {r['scene']} | {len(ok)} | {summary(cost)} | {column(lambda p: p['technique_cpu_ms'])} | "
+          f"{column(lambda p: p['startup_ms'])} | {column(lambda p: p['technique_ms'])} | "
+          f"{column(lambda p: p['technique_ms'] + p['waiting_ms'])} |")
 PY
