@@ -5,8 +5,8 @@
 # service would benchmark them; then the metrics, and a table in the form
 # of the thesis's figure 6.6: rMSE, PSNR, SSIM, FLIP, technique time and
 # render time per technique, scene and budget (markdown, on stdout); then
-# the equal-time comparison: each technique's rMSE at the fastest
-# technique's time to result at each budget, and the mean ranks at equal
+# the equal-time comparison: each technique's rMSE at the cheapest
+# technique's cost at each budget (sdk/exchange/src/cost.rs), and the mean ranks at equal
 # samples and at equal time. References are made once and cached beside
 # the scenes. REPEATS=N makes each run N times with other sample seeds.
 #
@@ -65,10 +65,10 @@ for r in sorted(runs, key=lambda r: (r["scene"], r["spp"], r["technique"])):
 
 rankings = json.load(open(sys.argv[1])).get("rankings")
 if rankings:
-    print("\n**Equal time** (rMSE at the fastest technique's time to result at each budget; — : no result that fast)\n")
+    print("\n**Equal time** (rMSE at the cheapest technique's cost at each budget; — : costs more)\n")
     cells = [c for c in rankings["equal_time"]["cells"] if c["metric"] == "rMSE"]
     techniques = sorted({p["technique"] for c in cells for p in c["places"]} | {t for c in cells for t in c["missing"]})
-    print("| scene | time s | fastest | " + " | ".join(techniques) + " |")
+    print("| scene | cost s | cheapest | " + " | ".join(techniques) + " |")
     print("|---|---|---|" + "---|" * len(techniques))
     for c in cells:
         at = c["at"]
