@@ -3,7 +3,8 @@
 # NL-means (Python) on the procedural sphere and the Embree Cornell box at
 # 16 spp, each run REPEATS times (default 5) with other sample seeds through
 # `fbksd run` with release binaries; prints, per technique and scene, the
-# median cost (the equal-time axis, sdk/exchange/src/cost.rs), the
+# median cost (the equal-time axis, sdk/exchange/src/cost.rs, as `fbksd
+# results compute` records it in the index), the
 # technique's CPU time after its hello, its start-up, and the wall times
 # of before (technique time, time to result), each with its coefficient of
 # variation over the seeds (markdown, on stdout). The C++ techniques are
@@ -22,26 +23,20 @@ nfor=$(build_technique nfor)
 target/release/fbksd run -t "box-filter-cpp=$box/box-filter-cpp" -t "nfor=$nfor/nfor" \
     -t "nlm=sdk/techniques/nlm/nlm.py" -t "box-filter-python=sdk/techniques/box-filter-python/box_filter.py" -s scenes/experimental/sphere -s scenes/production-small/cornell-box \
     --spp 16 --repeats "${REPEATS:-5}" --results "$work/results" >&2
+# The metrics' ranking records each run's cost by seed, as equal time charges it.
+target/release/fbksd results compute --results "$work/results" --scenes scenes --metrics MSE >&2
 python3 - "$work/results/index.json" <<'PY'
 import json, statistics as st, sys
-runs = json.load(open(sys.argv[1]))["runs"]
-# The cost as the ranking charges it: the technique's CPU time plus its samples
-# at the scene's render rate (the median renderer CPU per sample of every run
-# on the scene with that sample size).
-rates = {}
-for r in runs:
-    for p in r["repeats"]:
-        if p.get("render_cpu_ms", 0) > 0 and p["used_samples"] > 0:
-            rates.setdefault((r["scene"], p["sample_floats"]), []).append(p["render_cpu_ms"] / p["used_samples"])
-rates = {k: st.median(v) for k, v in rates.items()}
+index = json.load(open(sys.argv[1]))
+costs = {(c["technique"], c["scene"], c["spp"]): c["by_seed"] for c in index["rankings"]["costs"]}
 def summary(values):
     m = st.mean(values)
     return f"{st.median(values):.1f} ms | {100 * st.stdev(values) / m:.1f} %" if len(values) > 1 and m > 0 else "– | –"
 print("| technique | scene | seeds | cost | CV | technique CPU | CV | start-up | CV | technique time (wall) | CV | time to result (wall) | CV |")
 print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-for r in sorted(runs, key=lambda r: (r["technique"], r["scene"])):
+for r in sorted(index["runs"], key=lambda r: (r["technique"], r["scene"])):
     ok = [p for p in r["repeats"] if p["status"] == "ok"]
-    cost = [p["technique_cpu_ms"] + rates[(r["scene"], p["sample_floats"])] * p["used_samples"] for p in ok]
+    cost = list(costs[(r["technique"], r["scene"], r["spp"])].values())
     column = lambda f: summary([f(p) for p in ok])
     print(f"| {r['technique']} | {r['scene']} | {len(ok)} | {summary(cost)} | {column(lambda p: p['technique_cpu_ms'])} | "
           f"{column(lambda p: p['startup_ms'])} | {column(lambda p: p['technique_ms'])} | "

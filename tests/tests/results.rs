@@ -265,6 +265,10 @@ fn equal_time_ties_copies_and_ranks_doubled_work_below() {
             format!("{} {} spp: technique CPU {}", run["technique"], run["spp"], cpu.join("/"))
         })
         .collect();
+    // The index records the costs the ranking charged, one per run and seed.
+    let charged = index["rankings"]["costs"].as_array().unwrap();
+    assert_eq!(charged.len(), runs.len());
+    assert!(charged.iter().all(|c| c["by_seed"].as_object().unwrap().len() == 3), "{charged:?}");
     let cells = &index["rankings"]["equal_time"]["cells"];
     for t in ["a", "b", "doubled"] {
         assert_eq!(rank("equal_spp", t), 2.0, "the same images tie at equal samples");

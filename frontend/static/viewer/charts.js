@@ -23,12 +23,14 @@
     cpu: { label: "CPU time", of: (r) => r.cpu_ms },
   };
   FBKSD.TIME_MEASURES = TIME_MEASURES;
+  // The time axis of a chart: at equal time always the ranking's, the cost.
+  FBKSD.timeMeasure = (kind, measure) => TIME_MEASURES[kind === "equal_time" ? "cost" : measure] || TIME_MEASURES.cost;
 
   // The series of a chart: [{key, name, colour, points: [{x, y, spp}]}].
   // kind: "spp", "time" or "equal_time" (whose points are the ranking's
   // equal-time cells of the scene and metric; the time axis is then the cost).
   FBKSD.chartSeries = function (doc, scene, metric, kind, measure) {
-    const time = TIME_MEASURES[kind === "equal_time" ? "cost" : measure] || TIME_MEASURES.cost;
+    const time = FBKSD.timeMeasure(kind, measure);
     const cells = kind === "equal_time" ? ((doc.rankings && doc.rankings.equal_time) || []).filter((c) => c.scene === scene && c.metric === metric) : [];
     return doc.techniques.map((t, i) => {
       let points;

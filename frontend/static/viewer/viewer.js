@@ -209,8 +209,7 @@
 
     chartLabels() {
       const s = this.state;
-      // At equal time the axis is the ranking's: the cost.
-      const time = (FBKSD.TIME_MEASURES[s.chartX === "equal_time" ? "cost" : s.measure] || FBKSD.TIME_MEASURES.cost).label + " (ms)";
+      const time = FBKSD.timeMeasure(s.chartX, s.measure).label + " (ms)";
       return { x: s.chartX === "spp" ? "samples per pixel" : time, y: s.metric };
     }
 

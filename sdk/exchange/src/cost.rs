@@ -25,7 +25,7 @@
 
 use crate::record::RunStatus;
 use crate::results::{IndexEntry, Repeat};
-use crate::stats::{median, Samples};
+use crate::stats::{median, Samples, Spread};
 use std::collections::BTreeMap;
 
 /// The render rates of a set of runs, and so each run's cost.
@@ -48,7 +48,7 @@ impl Costs {
                     .push(r.render_cpu_ms / r.used_samples as f64);
             }
         }
-        let median_of = |v: Vec<f64>| median(&v.into_iter().enumerate().map(|(i, x)| (i as u64, x)).collect());
+        let median_of = |v: Vec<f64>| Spread::of(&v).map_or(0.0, |s| s.median);
         Costs { rates: rates.into_iter().map(|(k, v)| (k, median_of(v))).collect() }
     }
 

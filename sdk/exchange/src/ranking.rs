@@ -32,7 +32,7 @@
 
 use crate::cost::Costs;
 use crate::results::IndexEntry;
-use crate::stats::{differ, mean, same_cost, Samples};
+use crate::stats::{differ, mean, median, same_cost, Samples};
 use crate::RunStatus;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -152,7 +152,8 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
     let costs = Costs::of(runs);
     let mut by_scene: BTreeMap<&str, Vec<Timed>> = BTreeMap::new();
     for run in runs.iter().filter(|r| r.status == RunStatus::Ok) {
-        let timed = Timed { run, ms: costs.of_run(run), by_seed: costs.by_seed(run) };
+        let by_seed = costs.by_seed(run);
+        let timed = Timed { run, ms: median(&by_seed), by_seed };
         if timed.ms > 0.0 && timed.ms.is_finite() {
             by_scene.entry(&run.scene).or_default().push(timed);
         }

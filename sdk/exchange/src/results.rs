@@ -415,6 +415,23 @@ pub struct IndexRankings {
     pub equal_spp: Ranking,
     /// At equal time to the result.
     pub equal_time: Ranking,
+    /// Each run's cost by seed, as the equal-time ranking charged it
+    /// ([`crate::cost`]; absent in indexes ranked before costs).
+    #[serde(default)]
+    pub costs: Vec<RunCost>,
+}
+
+/// One run's cost, by sample seed, in ms.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunCost {
+    /// Technique.
+    pub technique: String,
+    /// Scene.
+    pub scene: String,
+    /// Budget in samples per pixel.
+    pub spp: u64,
+    /// The cost of each `ok` repeat, by seed.
+    pub by_seed: Samples,
 }
 
 impl Default for ResultsIndex {
@@ -424,11 +441,23 @@ impl Default for ResultsIndex {
 }
 
 impl ResultsIndex {
-    /// Ranks the runs at equal samples and at equal time.
+    /// Ranks the runs at equal samples and at equal time, and records the
+    /// costs the equal-time ranking charged.
     pub fn rank(&mut self, lower_is_better: impl Fn(&str) -> bool + Copy) {
+        let costs = crate::cost::Costs::of(&self.runs);
         self.rankings = Some(IndexRankings {
             equal_spp: crate::ranking::equal_spp(&self.runs, lower_is_better),
             equal_time: crate::ranking::equal_time(&self.runs, lower_is_better),
+            costs: self
+                .runs
+                .iter()
+                .map(|r| RunCost {
+                    technique: r.technique.clone(),
+                    scene: r.scene.clone(),
+                    spp: r.spp,
+                    by_seed: costs.by_seed(r),
+                })
+                .collect(),
         });
     }
 }

@@ -183,7 +183,8 @@ pub struct ViewerRun {
     #[serde(default)]
     pub timing: Option<Timing>,
     /// The run's cost in ms, the equal-time axis ([`crate::cost`]: pooled
-    /// over the document's runs, see [`ViewerData::set_costs`]).
+    /// over the document's runs, so set by [`ViewerData::set_costs`], not
+    /// by [`ViewerRun::measured`]).
     #[serde(default)]
     pub cost_ms: f64,
     /// The technique's CPU time in ms, hello → result (median).
@@ -217,7 +218,7 @@ impl ViewerRun {
             seeds: entry.repeats.len().max(1),
             intervals: entry.intervals.clone(),
             timing: entry.timing,
-            cost_ms: Costs::of(std::slice::from_ref(entry)).of_run(entry),
+            cost_ms: 0.0,
             technique_cpu_ms: entry.technique_cpu_ms,
             startup_ms: entry.startup_ms,
         }

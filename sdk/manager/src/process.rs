@@ -142,8 +142,8 @@ impl Running for Supervised {
     }
 
     fn tree_cpu_clock(&self) -> Option<CpuClock> {
+        // Not read here: each read scans /proc, and a group it cannot read reads as `None` later.
         let group = self.pid;
-        process_group_cpu(group)?;
         Some(Box::new(move || process_group_cpu(group)))
     }
 }
