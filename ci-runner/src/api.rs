@@ -153,7 +153,15 @@ impl Api {
     /// Says what the runner prepares before it takes jobs (`None`: ready);
     /// shown on the server's home page.
     pub async fn status(&self, runner_token: &str, preparing: Option<&str>) -> Result<(), ApiError> {
-        let body = StatusReport { preparing: preparing.map(str::to_string) };
+        self.report(runner_token, StatusReport { preparing: preparing.map(str::to_string), machine: None }).await
+    }
+
+    /// Tells the server this runner is ready, and what its machine is now.
+    pub async fn ready(&self, runner_token: &str, machine: &serde_json::Value) -> Result<(), ApiError> {
+        self.report(runner_token, StatusReport { preparing: None, machine: Some(machine.clone()) }).await
+    }
+
+    async fn report(&self, runner_token: &str, body: StatusReport) -> Result<(), ApiError> {
         self.send("a status report", Duration::from_secs(30), || {
             self.http.post(self.url("runners/status")).bearer_auth(runner_token).json(&body)
         })

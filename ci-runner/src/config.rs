@@ -53,6 +53,13 @@ pub struct RunnerConfig {
     #[arg(long, env = "FBKSD_CI_CPUS")]
     pub cpus: Option<String>,
 
+    /// A CPU quota for every container, in cores (Docker's `--cpus`, e.g.
+    /// 0.5), for a runner that shares its machine. It is recorded with
+    /// every result; it delays runs but does not change their CPU-time
+    /// cost, so it is not part of the runner class.
+    #[arg(long, env = "FBKSD_CI_CPU_QUOTA", value_parser = parse_quota)]
+    pub cpu_quota: Option<f64>,
+
     /// Memory of a technique's container (build or run), in MiB; swap is not allowed.
     #[arg(long, env = "FBKSD_CI_MEMORY_MIB", default_value_t = 2048)]
     pub memory_mib: u64,
@@ -96,6 +103,14 @@ pub struct RunnerConfig {
     /// How long a claim waits for a job before asking again.
     #[arg(long, env = "FBKSD_CI_POLL_SECONDS", default_value_t = 20)]
     pub poll_seconds: u64,
+}
+
+/// A quota in cores: positive and finite.
+fn parse_quota(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(cores) if cores.is_finite() && cores >= 0.01 => Ok(cores),
+        _ => Err(format!("a CPU quota is a number of cores, 0.01 or more (e.g. 0.5), not {text:?}")),
+    }
 }
 
 impl RunnerConfig {

@@ -15,6 +15,7 @@
 //! author can act on.
 
 use crate::api::{Api, ApiError};
+use crate::calibration::Calibration;
 use crate::images::Images;
 use crate::launcher::{DockerLauncher, RoleContainer};
 use crate::machine::Machine;
@@ -201,6 +202,8 @@ pub struct JobContext {
     pub images: Images,
     /// The machine.
     pub machine: Machine,
+    /// Its latest calibration (at start, then after every job).
+    pub calibration: Arc<Mutex<Calibration>>,
     /// The scene pool.
     pub scenes: Vec<PoolScene>,
     /// This runner's id and name.
@@ -230,14 +233,8 @@ pub async fn run(
         .map_err(|e| Failure::infrastructure(format!("{}: {e}", dir.display())))?;
     let src = dir.join("src");
     log.line(format!(
-        "[fbksd-ci] job {} ({}, attempt {}) on runner {} ({}, {} cores pinned: {})",
-        claim.job.id,
-        claim.job.kind,
-        claim.job.attempts,
-        ctx.runner.1,
-        ctx.machine.cpu_model,
-        ctx.machine.cores,
-        ctx.machine.cpuset
+        "[fbksd-ci] job {} ({}, attempt {}) on runner {} (class {}, cores pinned: {})",
+        claim.job.id, claim.job.kind, claim.job.attempts, ctx.runner.1, ctx.machine.class, ctx.machine.cpuset
     ));
     clone(claim, &src, ctx.config.max_checkout_mib << 20).await?;
     log.line(format!("[fbksd-ci] checked out {} at {}", claim.job.project, claim.commit));
@@ -733,7 +730,9 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
             version: Some(info.versions[0].name.clone()),
             runner: Some(ctx.runner.1.clone()),
             runner_id: Some(ctx.runner.0.clone()),
-            machine: serde_json::to_value(&ctx.machine).unwrap_or_default(),
+            machine: ctx
+                .machine
+                .record(&ctx.calibration.lock().map(|c| c.clone()).unwrap_or_else(|e| e.into_inner().clone())),
             limits: Some(SandboxLimits {
                 run_timeout_s: ctx.config.run_timeout.as_secs_f64(),
                 memory_mib: ctx.config.memory_mib,

@@ -12,6 +12,8 @@
 //! references no container ever sees, and uploaded with the images, logs and
 //! provenance (image digests, scene and reference hashes, CPU model).
 //!
+//! - [`calibration`]: the fixed workload a runner times at start and between jobs.
+//! - [`machine`]: the machine and its runner class, recorded with every result.
 //! - [`config`]: the runner's settings (command line or environment).
 //! - [`api`]: the server's runner API, with retries across server restarts.
 //! - [`images`]: the image manifest written by `deploy/build-images.sh`.
@@ -25,6 +27,7 @@
 #![deny(missing_docs)]
 
 pub mod api;
+pub mod calibration;
 pub mod config;
 pub mod images;
 pub mod job;

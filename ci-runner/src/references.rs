@@ -147,6 +147,7 @@ pub async fn prepare(root: &Path, scenes: &[SceneReference], api: &Api, runner_t
             wait_seconds: 5,
             reference_keys: missing.iter().map(|s| s.key.clone()).collect(),
             references_only: true,
+            runner_class: None,
         };
         if let Some(claim) = api.claim(runner_token, &request).await? {
             made += 1;

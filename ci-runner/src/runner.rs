@@ -15,6 +15,7 @@
 //!   runner's label, job directories, rendezvous directories).
 
 use crate::api::{Api, ApiError};
+use crate::calibration::Calibration;
 use crate::images::Images;
 use crate::job::{self, Failure, JobContext, JobLog};
 use crate::machine::Machine;
@@ -25,7 +26,7 @@ use fbksd_exchange::runner_api::{Claim, ClaimRequest, JobKind, Outcome, RunnerCr
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// A registered runner, ready to claim jobs.
@@ -73,9 +74,10 @@ impl Runner {
         config.scene_root = std::fs::canonicalize(&config.scene_root)
             .map_err(|e| anyhow::anyhow!("scene root {}: {e}", config.scene_root.display()))?;
         let api = Api::new(&config.server);
-        let machine = Machine::probe(config.cpus.as_deref());
+        let machine = Machine::probe(config.cpus.as_deref(), config.cpu_quota);
+        let calibration = calibrate().await;
         // Registered first, so the server can show what is being prepared.
-        let credentials = identity(&config, &api, &machine).await?;
+        let credentials = identity(&config, &api, &machine.record(&calibration)).await?;
         let scene_dirs = config.scene_dirs()?;
         let prepared = async {
             let references = crate::references::keys(&config.scene_root, &scene_dirs).await?;
@@ -97,7 +99,8 @@ impl Runner {
         let docker = wait_for_docker(&api, &credentials.token).await;
         let images = Images::resolve(&config.images, &docker).await?;
         // Pinned even when no cores are named: to all of them, as recorded in every result.
-        let sandbox = Sandbox::new(docker, &credentials.id, machine.cpuset.clone(), config.pids, config.tmpfs_mib);
+        let sandbox = Sandbox::new(docker, &credentials.id, machine.cpuset.clone(), config.pids, config.tmpfs_mib)
+            .with_cpu_quota(config.cpu_quota);
         let left = sandbox.remove_runner_containers().await;
         if left > 0 {
             tracing::warn!("removed {left} containers a previous run of this runner left behind");
@@ -113,22 +116,33 @@ impl Runner {
         }
         std::fs::set_permissions(&rendezvous_parent, std::fs::Permissions::from_mode(0o700))?;
         tracing::info!(
-            "runner {} ({}) ready: {} scenes, images {} / {} / {}, {} on cores {}",
+            "runner {} ({}) ready: {} scenes, images {} / {} / {}, class {} on cores {}, calibration {:.1} ms CPU",
             config.runner_name(),
             credentials.id,
             scenes.len(),
             images.cpp.tag,
             images.python.tag,
             images.renderer.tag,
-            machine.cpu_model,
-            machine.cpuset
+            machine.class,
+            machine.cpuset,
+            calibration.cpu_ms
         );
-        if let Err(e) = api.status(&credentials.token, None).await {
+        if let Err(e) = api.ready(&credentials.token, &machine.record(&calibration)).await {
             tracing::warn!("telling the server this runner is ready: {e}");
         }
         let runner = (credentials.id.clone(), config.runner_name());
         Ok(Runner {
-            ctx: JobContext { config, api, sandbox, images, machine, scenes, runner, rendezvous_parent },
+            ctx: JobContext {
+                config,
+                api,
+                sandbox,
+                images,
+                machine,
+                calibration: Arc::new(Mutex::new(calibration)),
+                scenes,
+                runner,
+                rendezvous_parent,
+            },
             credentials,
             references,
         })
@@ -154,6 +168,7 @@ impl Runner {
                 wait_seconds: self.ctx.config.poll_seconds,
                 reference_keys: self.references.iter().map(|s| s.key.clone()).collect(),
                 references_only: false,
+                runner_class: Some(self.ctx.machine.class.clone()),
             };
             let claimed = tokio::select! {
                 _ = &mut shutdown => break,
@@ -204,7 +219,19 @@ impl Runner {
             tracing::warn!("job {}: removed {left} containers it left behind", claim.job.id);
         }
         remove_job_dir(&ctx.sandbox, &ctx.images, &dir).await;
+        // Between jobs, so the next result says how fast this runner is now.
+        let calibration = calibrate().await;
+        if let Ok(mut kept) = ctx.calibration.lock() {
+            *kept = calibration;
+        }
     }
+}
+
+/// Times the calibration workload off the async threads.
+async fn calibrate() -> Calibration {
+    tokio::task::spawn_blocking(crate::calibration::measure)
+        .await
+        .unwrap_or_else(|e| std::panic::resume_unwind(e.into_panic()))
 }
 
 /// Runs `work` for a claimed job with heartbeats and a streaming log, and
@@ -304,7 +331,7 @@ async fn remove_job_dir(sandbox: &Sandbox, images: &Images, dir: &Path) {
 /// registration token. A kept identity the server no longer knows (its data
 /// directory was started afresh) is replaced when the runner has the
 /// registration token, instead of being refused on every claim.
-async fn identity(config: &RunnerConfig, api: &Api, machine: &Machine) -> anyhow::Result<RunnerCredentials> {
+async fn identity(config: &RunnerConfig, api: &Api, machine: &serde_json::Value) -> anyhow::Result<RunnerCredentials> {
     let path = config.work_dir.join("runner.json");
     if let Ok(text) = std::fs::read_to_string(&path) {
         let kept: RunnerCredentials =
@@ -327,8 +354,7 @@ async fn identity(config: &RunnerConfig, api: &Api, machine: &Machine) -> anyhow
             path.display()
         );
     };
-    let machine = serde_json::to_value(machine)?;
-    let credentials = api.register(token, &config.runner_name(), &machine).await?;
+    let credentials = api.register(token, &config.runner_name(), machine).await?;
     write_private(&path, &serde_json::to_vec_pretty(&credentials)?)?;
     tracing::info!("registered as runner {}", credentials.id);
     Ok(credentials)

@@ -88,12 +88,19 @@ pub struct Sandbox {
     cpuset: String,
     pids: i64,
     tmpfs_mib: u64,
+    cpu_quota: Option<f64>,
 }
 
 impl Sandbox {
     /// A sandbox for the runner `runner_id`, its containers pinned to `cpuset` (`0-3`).
     pub fn new(docker: Docker, runner_id: &str, cpuset: String, pids: i64, tmpfs_mib: u64) -> Sandbox {
-        Sandbox { docker, runner_id: runner_id.to_string(), cpuset, pids, tmpfs_mib }
+        Sandbox { docker, runner_id: runner_id.to_string(), cpuset, pids, tmpfs_mib, cpu_quota: None }
+    }
+
+    /// The same sandbox with every container under a quota of `cores` CPUs.
+    pub fn with_cpu_quota(mut self, cores: Option<f64>) -> Sandbox {
+        self.cpu_quota = cores;
+        self
     }
 
     /// The user containers run as: `nobody`, whoever runs the runner. Never
@@ -141,6 +148,7 @@ impl Sandbox {
             memory_swap: Some(memory),
             pids_limit: Some(self.pids),
             cpuset_cpus: Some(spec.cpuset.clone().unwrap_or_else(|| self.cpuset.clone())),
+            nano_cpus: self.cpu_quota.map(|cores| (cores * 1e9) as i64),
             ulimits: Some(vec![
                 ulimit("fsize", spec.max_file_bytes.unwrap_or(MAX_FILE_BYTES).min(MAX_FILE_BYTES)),
                 ulimit("core", 0),

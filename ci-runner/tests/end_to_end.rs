@@ -87,6 +87,16 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
         assert!(provenance["image_digest"].as_str().is_some_and(|d| d.starts_with("sha256:")), "{set}");
         assert!(provenance["machine"]["cores"].as_u64().is_some_and(|n| n >= 1), "{provenance}");
         assert!(provenance["machine"]["cpu_model"].as_str().is_some_and(|m| !m.is_empty()), "{provenance}");
+        // The runner class its times are compared within, and how fast the runner was then.
+        let class = provenance["machine"]["class"].as_str().unwrap_or_default();
+        assert!(class.contains(" · x86-64-v") || class.contains(std::env::consts::ARCH), "{provenance}");
+        let calibration = &provenance["machine"]["calibration"];
+        assert_eq!(calibration["workload"], fbksd_ci::calibration::WORKLOAD, "{provenance}");
+        assert!(calibration["cpu_ms"].as_f64().is_some_and(|ms| ms > 0.0), "{provenance}");
+        // The season's times now come from this runner's class; the board says so.
+        let board: serde_json::Value =
+            reqwest::get(format!("{}/api/v1/leaderboard", server.url)).await.unwrap().json().await.unwrap();
+        assert_eq!(board["runner_class"].as_str(), Some(class), "{board}");
         // More samples, less error: the numbers are real, Mitsuba's in its sandbox too.
         for scene in ["fireflies", "spheres-sky"] {
             let mse = |spp: u64| {

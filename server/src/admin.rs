@@ -41,17 +41,25 @@ pub struct Skipped {
 /// Starts a season (the scene pool changed; the old boards stay readable)
 /// and queues a benchmark of every technique published in the previous
 /// one, at the same commit, published on success.
-pub async fn start_season(state: &AppState, note: &str) -> Result<SeasonStarted, ServiceError> {
+/// `runner_class` names the runner class its times come from (the new
+/// hardware of the fleet, say); by default its first result's names it.
+pub async fn start_season(
+    state: &AppState,
+    note: &str,
+    runner_class: Option<&str>,
+) -> Result<SeasonStarted, ServiceError> {
     let note = note.trim();
     if note.is_empty() {
         return Err(ServiceError::invalid("missing_note", "say what changed in the scene pool"));
     }
     let previous = crate::results::current_season(&state.pool).await?;
     let published = crate::results::published(&state.pool, previous).await?;
-    sqlx::query("INSERT INTO seasons (number, note, started_at) VALUES ($1, $2, $3)")
+    let runner_class = runner_class.map(str::trim).filter(|c| !c.is_empty());
+    sqlx::query("INSERT INTO seasons (number, note, started_at, runner_class) VALUES ($1, $2, $3, $4)")
         .bind(previous + 1)
         .bind(note)
         .bind(crate::now_ms())
+        .bind(runner_class)
         .execute(&state.pool)
         .await?;
     crate::results::boards_changed(&state.pool).await?;

@@ -174,14 +174,19 @@ pub async fn claim(
     postgres: bool,
     runner_id: &str,
     lease_ms: i64,
+    runner_class: Option<&str>,
 ) -> Result<Option<Claimed>, sqlx::Error> {
+    // A season's benchmarks go to runners of the class its times come from
+    // (a runner that names none gets them only while the season names none).
     let pick = "SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
          WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark') \
+         AND (j.kind = 'build' OR NOT EXISTS (SELECT 1 FROM seasons s WHERE s.number = j.season \
+              AND s.runner_class IS NOT NULL AND s.runner_class <> $5)) \
          ORDER BY u.is_service, \
          (SELECT COUNT(*) FROM jobs r WHERE r.user_id = j.user_id AND r.state = 'running'), \
          (SELECT COALESCE(MAX(r.started_at), 0) FROM jobs r WHERE r.user_id = j.user_id), \
          j.created_at, j.id LIMIT 1";
-    claim_picked(pool, postgres, runner_id, lease_ms, pick, &[]).await
+    claim_picked(pool, postgres, runner_id, lease_ms, pick, &[runner_class.unwrap_or_default().to_string()]).await
 }
 
 /// Hands the oldest queued reference job of one of `keys` (the scenes the

@@ -120,8 +120,11 @@ pub struct Board {
     /// Groups by scene, then spp.
     pub groups: Vec<Group>,
     /// Per scene whose runs were scored against different references: what
-    /// was left out ([`one_reference_per_scene`]).
+    /// was left out ([`one_reference_per_scene`]); and the sets measured on
+    /// another runner class, left out of equal time ([`one_runner_class`]).
     pub left_out: Vec<String>,
+    /// The runner class the season's times come from, once one is named.
+    pub runner_class: Option<String>,
 }
 
 /// What to show.
@@ -140,6 +143,8 @@ type BoardKey = (Option<String>, Option<String>);
 
 /// The published sets of one season with their runs and scene tags.
 struct SeasonData {
+    /// The runner class its times come from.
+    runner_class: Option<String>,
     sets: Vec<ResultSet>,
     runs: Vec<StoredRun>,
     tags: BTreeMap<String, BTreeSet<String>>,
@@ -218,6 +223,7 @@ async fn load_season(pool: &AnyPool, season: i64) -> Result<SeasonData, sqlx::Er
     let mut tags = BTreeMap::new();
     crate::results::scene_tags(pool, Selection::Published(season), &mut tags).await?;
     Ok(SeasonData {
+        runner_class: crate::results::season_class(pool, season).await?,
         sets: crate::results::published(pool, season).await?,
         runs: crate::results::runs(pool, Selection::Published(season)).await?,
         tags,
@@ -244,11 +250,12 @@ pub async fn build(
     };
     let data = cache.season(pool, season).await?;
     let key = (query.sort.clone(), query.tag.clone());
+    let class = data.runner_class.as_deref();
     let Some(extra) = extra else {
         if let Some(board) = data.boards.lock().ok().and_then(|b| b.get(&key).cloned()) {
             return Ok(board);
         }
-        let board = Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, None));
+        let board = Arc::new(assemble(season, class, &data.sets, &data.runs, &data.tags, query, None));
         if let Ok(mut boards) = data.boards.lock() {
             // Bounded: only metric and tag names that exist are worth keeping.
             if boards.len() < 256 {
@@ -263,7 +270,7 @@ pub async fn build(
     }
     let highlighted = Some(extra.id.as_str());
     let board = if data.sets.iter().any(|s| s.id == extra.id) {
-        Arc::new(assemble(season, &data.sets, &data.runs, &data.tags, query, highlighted))
+        Arc::new(assemble(season, class, &data.sets, &data.runs, &data.tags, query, highlighted))
     } else {
         let mut sets = data.sets.clone();
         sets.push(extra.clone());
@@ -271,7 +278,7 @@ pub async fn build(
         runs.extend(crate::results::runs(pool, Selection::One(&extra.id)).await?);
         let mut tags = data.tags.clone();
         crate::results::scene_tags(pool, Selection::One(&extra.id), &mut tags).await?;
-        Arc::new(assemble(season, &sets, &runs, &tags, query, highlighted))
+        Arc::new(assemble(season, class, &sets, &runs, &tags, query, highlighted))
     };
     if let Ok(mut pages) = data.pages.lock() {
         if pages.len() >= MAX_CACHED_PAGES {
@@ -328,9 +335,39 @@ pub fn one_reference_per_scene<'a>(
     (kept, notes)
 }
 
+/// The runs of `runs` that equal time may compare: those of the sets
+/// measured on `class`, the runner class the season's times come from (all
+/// of them while it names none). A cost is CPU time, and CPU time depends
+/// on the CPU: a technique measured on a faster class would win on the
+/// machine, not on its work. Also returns a line saying what was left out.
+pub fn one_runner_class<'a>(
+    sets: &[ResultSet],
+    runs: &[&'a StoredRun],
+    class: Option<&str>,
+) -> (Vec<&'a StoredRun>, Option<String>) {
+    let Some(class) = class else { return (runs.to_vec(), None) };
+    let other: BTreeSet<&str> = sets
+        .iter()
+        .filter(|s| crate::results::runner_class(&s.provenance["machine"]) != Some(class))
+        .map(|s| s.id.as_str())
+        .collect();
+    let (kept, left): (Vec<&StoredRun>, Vec<&StoredRun>) =
+        runs.iter().partition(|r| !other.contains(r.result_id.as_str()));
+    let left: BTreeSet<&str> = left.iter().map(|r| r.result_id.as_str()).collect();
+    let note = (!left.is_empty()).then(|| {
+        format!(
+            "{} result set(s) measured on another runner class are ranked at equal spp only: \
+             equal time compares the runs of this season's class, {class}",
+            left.len()
+        )
+    });
+    (kept, note)
+}
+
 /// The pure part of [`build`].
 fn assemble(
     season: i64,
+    runner_class: Option<&str>,
     sets: &[ResultSet],
     runs: &[StoredRun],
     scene_tags: &BTreeMap<String, BTreeSet<String>>,
@@ -361,27 +398,36 @@ fn assemble(
         None => true,
     };
 
-    let (runs, left_out) = one_reference_per_scene(sets, runs, highlighted);
+    let (runs, mut left_out) = one_reference_per_scene(sets, runs, highlighted);
+    let runs: Vec<&StoredRun> =
+        runs.into_iter().filter(|r| shown(&r.scene) && technique_of.contains_key(r.result_id.as_str())).collect();
+    let (timed, other_class) = one_runner_class(sets, &runs, runner_class);
+    left_out.extend(other_class);
+    let timed: BTreeSet<(&str, &str, i64)> =
+        timed.iter().map(|r| (r.result_id.as_str(), r.scene.as_str(), r.spp)).collect();
     // Every shown run as an index entry of its result set (techniques are
-    // told apart by set id), its repeats summed up.
-    let index: Vec<IndexEntry> = runs
-        .into_iter()
-        .filter(|r| shown(&r.scene) && technique_of.contains_key(r.result_id.as_str()))
-        .map(|r| r.index_entry(&r.result_id))
+    // told apart by set id), its repeats summed up; and whether equal time
+    // may compare it.
+    let index: Vec<(IndexEntry, bool)> = runs
+        .iter()
+        .map(|r| (r.index_entry(&r.result_id), timed.contains(&(r.result_id.as_str(), r.scene.as_str(), r.spp))))
         .collect();
     // Rank by the sort metric only.
-    let by_sort: Vec<IndexEntry> = index
+    let by_sort: Vec<(IndexEntry, bool)> = index
         .iter()
         .cloned()
-        .map(|mut e| {
+        .map(|(mut e, timed)| {
             e.metrics.retain(|m, _| *m == sort);
             e.repeats.iter_mut().for_each(|r| r.metrics.retain(|m, _| *m == sort));
-            e
+            (e, timed)
         })
         .collect();
-    let at_spp = equal_spp(&by_sort, lower_is_better);
-    let at_time = equal_time(&by_sort, lower_is_better);
-    let costs = fbksd_exchange::cost::Costs::of(&index);
+    let timed_only = |entries: &[(IndexEntry, bool)]| -> Vec<IndexEntry> {
+        entries.iter().filter(|(_, timed)| *timed).map(|(e, _)| e.clone()).collect()
+    };
+    let at_time = equal_time(&timed_only(&by_sort), lower_is_better);
+    let costs = fbksd_exchange::cost::Costs::of(&timed_only(&index));
+    let at_spp = equal_spp(&by_sort.into_iter().map(|(e, _)| e).collect::<Vec<_>>(), lower_is_better);
     let places: BTreeMap<(&str, u64, &str), &fbksd_exchange::ranking::Place> = at_spp
         .cells
         .iter()
@@ -393,7 +439,7 @@ fn assemble(
         .collect();
 
     let mut by_group: BTreeMap<(String, i64), Vec<Entry>> = BTreeMap::new();
-    for run in &index {
+    for (run, timed) in &index {
         let set = technique_of[run.technique.as_str()];
         let place = places.get(&(run.scene.as_str(), run.spp, run.technique.as_str()));
         by_group.entry((run.scene.clone(), run.spp as i64)).or_default().push(Entry {
@@ -412,7 +458,7 @@ fn assemble(
                 .flatten()
                 .collect(),
             technique_ms: run.technique_ms,
-            cost_ms: costs.of_run(run),
+            cost_ms: if *timed { costs.of_run(run) } else { f64::NAN },
             time_cv: run.timing.filter(|_| run.repeats.len() > 1).map(|t| t.technique.cv),
             image: run.image.clone(),
         });
@@ -467,6 +513,7 @@ fn assemble(
         standings,
         groups,
         left_out,
+        runner_class: runner_class.map(str::to_string),
     }
 }
 
@@ -592,7 +639,7 @@ mod tests {
             runs.push(repeated("b", "s", spp, [e * (1.0 + 1e-9), 1.1 * e, 0.9 * e], t));
             runs.push(repeated("c", "s", spp, [0.1 * e, 0.11 * e, 0.09 * e], 4.0 * t));
         }
-        let board = assemble(1, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
+        let board = assemble(1, None, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
         let group = &board.groups[0];
         let entry = |t: &str| group.entries.iter().find(|e| e.technique == t).unwrap();
         assert_eq!(entry("alpha").tied_with, ["beta"]);
@@ -607,6 +654,58 @@ mod tests {
         // at 40 ms its 4 spp (0.025) beats alpha's 16 spp (0.0625).
         assert_eq!(standing("gamma").mean_rank_time, (3.0 + 1.0) / 2.0);
         assert_eq!(standing("alpha").mean_rank_time, (1.5 + 2.5) / 2.0);
+    }
+
+    #[test]
+    fn equal_time_compares_only_the_seasons_runner_class_and_says_what_it_left_out() {
+        let on = |id: &str, technique: &str, class: Option<&str>| {
+            let mut s = set(id, technique);
+            if let Some(class) = class {
+                s.provenance = serde_json::json!({ "machine": { "class": class } });
+            }
+            s
+        };
+        let slow = "Slow CPU · x86-64-v2 · 2 cores · 8 GiB";
+        // gamma, the same work as alpha, measured on a machine twice as fast
+        // (and another set from before classes): on one axis gamma would win
+        // every equal-time point on the machine alone.
+        let sets = [
+            on("a", "alpha", Some(slow)),
+            on("b", "beta", Some(slow)),
+            on("c", "gamma", Some("Fast CPU")),
+            on("d", "delta", None),
+        ];
+        let mut runs = Vec::new();
+        for (spp, t) in [(4, 10.0), (16, 40.0)] {
+            let e = 1.0 / spp as f64;
+            runs.push(repeated("a", "s", spp, [e, 1.1 * e, 0.9 * e], t));
+            runs.push(repeated("b", "s", spp, [2.0 * e, 2.2 * e, 1.8 * e], t));
+            runs.push(repeated("c", "s", spp, [e, 1.1 * e, 0.9 * e], t / 2.0));
+            runs.push(repeated("d", "s", spp, [e, 1.1 * e, 0.9 * e], t / 2.0));
+        }
+        let board = assemble(1, Some(slow), &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
+        let standing = |t: &str| board.standings.iter().find(|s| s.technique == t).unwrap();
+        assert_eq!(standing("alpha").mean_rank_time, 1.0, "alpha is compared with beta only");
+        assert_eq!(standing("beta").mean_rank_time, 2.0);
+        for other in ["gamma", "delta"] {
+            assert!(standing(other).mean_rank_time.is_nan(), "{other} has no equal-time rank");
+            // At equal spp every set counts: gamma and delta tie with alpha.
+            assert_eq!(standing(other).mean_rank, standing("alpha").mean_rank);
+        }
+        let entry = |t: &str| board.groups[0].entries.iter().find(|e| e.technique == t).unwrap();
+        assert!(entry("gamma").cost_ms.is_nan() && entry("alpha").cost_ms > 0.0);
+        assert_eq!(board.runner_class.as_deref(), Some(slow));
+        assert_eq!(board.left_out.len(), 1, "{:?}", board.left_out);
+        assert!(
+            board.left_out[0].starts_with("2 result set(s) measured on another runner class"),
+            "{:?}",
+            board.left_out
+        );
+        assert!(board.left_out[0].ends_with(slow), "{:?}", board.left_out);
+
+        // A season that names no class yet compares everything.
+        let unnamed = assemble(1, None, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
+        assert!(unnamed.left_out.is_empty() && unnamed.standings.iter().all(|s| s.mean_rank_time.is_finite()));
     }
 
     #[test]
@@ -627,7 +726,7 @@ mod tests {
             against(run("new", "bands", Some(0.2), 0.5), "sha256:cccc"),
         ];
         let sets = [old, new, other];
-        let board = assemble(1, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
+        let board = assemble(1, None, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
         let on = |board: &Board, scene: &str| -> Vec<String> {
             let group = board.groups.iter().find(|g| g.scene == scene).unwrap();
             group.entries.iter().map(|e| e.technique.clone()).collect()
@@ -638,7 +737,7 @@ mod tests {
         assert!(board.left_out[0].starts_with("sphere: 1 result set(s)"), "{:?}", board.left_out);
 
         // A private page ranks against its own set's references.
-        let page = assemble(1, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), Some("old"));
+        let page = assemble(1, None, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), Some("old"));
         assert_eq!(on(&page, "sphere"), ["old-filter"]);
         assert!(page.left_out[0].starts_with("sphere: 2 result set(s)"), "{:?}", page.left_out);
     }
@@ -657,7 +756,7 @@ mod tests {
             ("s1".to_string(), BTreeSet::from(["dof".to_string()])),
             ("s2".to_string(), BTreeSet::new()),
         ]);
-        let board = assemble(1, &sets, &runs, &tags, &BoardQuery::default(), Some("b"));
+        let board = assemble(1, None, &sets, &runs, &tags, &BoardQuery::default(), Some("b"));
         assert_eq!(board.sort, "MSE");
         assert_eq!(board.groups[0].entries[0].technique, "beta");
         assert_eq!(board.groups[1].entries[0].technique, "alpha", "a missing value sorts last");
@@ -665,14 +764,22 @@ mod tests {
         assert_eq!(board.standings.iter().map(|s| s.mean_rank).collect::<Vec<_>>(), [1.5, 1.5]);
         assert!(board.standings.iter().any(|s| s.highlighted && s.technique == "beta" && s.missing == 1));
 
-        let by_ssim =
-            assemble(1, &sets, &runs, &tags, &BoardQuery { sort: Some("SSIM".into()), ..Default::default() }, None);
+        let by_ssim = assemble(
+            1,
+            None,
+            &sets,
+            &runs,
+            &tags,
+            &BoardQuery { sort: Some("SSIM".into()), ..Default::default() },
+            None,
+        );
         assert_eq!(by_ssim.groups[0].entries[0].technique, "beta", "higher SSIM is better");
         // A failed run has no value by any metric, whatever it recorded.
         assert_eq!(by_ssim.groups[1].entries[0].technique, "alpha");
         assert_eq!(by_ssim.groups[1].entries[1].values, [None, None]);
 
-        let dof = assemble(1, &sets, &runs, &tags, &BoardQuery { tag: Some("dof".into()), ..Default::default() }, None);
+        let dof =
+            assemble(1, None, &sets, &runs, &tags, &BoardQuery { tag: Some("dof".into()), ..Default::default() }, None);
         assert_eq!(dof.groups.len(), 1);
         assert_eq!(dof.standings[0].technique, "beta");
         assert_eq!(dof.tags, ["dof"]);

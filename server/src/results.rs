@@ -383,6 +383,17 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
     .bind(if new.publish { Some(now) } else { None })
     .execute(&mut **tx)
     .await?;
+    // The season's first result measured on a named class names the season's.
+    if let Some(class) = runner_class(&new.upload.provenance.machine) {
+        let named = sqlx::query("UPDATE seasons SET runner_class = $1 WHERE number = $2 AND runner_class IS NULL")
+            .bind(class)
+            .bind(new.season)
+            .execute(&mut **tx)
+            .await?;
+        if named.rows_affected() > 0 {
+            boards_changed(&mut **tx).await?;
+        }
+    }
     for run in &new.upload.runs {
         sqlx::query(
             "INSERT INTO result_runs (result_id, scene, spp, status, message, technique_ms, render_ms, wall_ms, cpu_ms, \
@@ -567,6 +578,19 @@ pub fn staging_dir(data_dir: &std::path::Path, job_id: &str) -> std::path::PathB
 /// The current (latest) season.
 pub async fn current_season(pool: &AnyPool) -> Result<i64, sqlx::Error> {
     sqlx::query("SELECT MAX(number) AS n FROM seasons").fetch_one(pool).await?.try_get("n")
+}
+
+/// The runner class `season`'s times come from, once one is named.
+pub async fn season_class(pool: &AnyPool, season: i64) -> Result<Option<String>, sqlx::Error> {
+    let row =
+        sqlx::query("SELECT runner_class FROM seasons WHERE number = $1").bind(season).fetch_optional(pool).await?;
+    Ok(row.and_then(|r| r.try_get::<Option<String>, _>("runner_class").ok().flatten()))
+}
+
+/// The runner class a result's machine record names (`machine.class`,
+/// written by fbksd-ci), if any.
+pub fn runner_class(machine: &serde_json::Value) -> Option<&str> {
+    machine["class"].as_str().filter(|c| !c.trim().is_empty())
 }
 
 /// Every season: (number, note, start).

@@ -144,6 +144,18 @@ pub async fn set_status(pool: &AnyPool, runner_id: &str, preparing: Option<&str>
     Ok(())
 }
 
+/// Records what a runner says its machine is now (its class and
+/// calibration change with its hardware and its settings).
+pub async fn set_machine(pool: &AnyPool, runner_id: &str, machine: &serde_json::Value) -> Result<(), sqlx::Error> {
+    // Bounded as a registration's is: by the API's body limit.
+    sqlx::query("UPDATE runners SET machine = $1 WHERE id = $2")
+        .bind(machine.to_string())
+        .bind(runner_id)
+        .execute(pool)
+        .await?;
+    Ok(())
+}
+
 /// Every runner, most recently seen first.
 pub async fn all(pool: &AnyPool) -> Result<Vec<Runner>, sqlx::Error> {
     let rows = sqlx::query(

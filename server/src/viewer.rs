@@ -61,7 +61,18 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
         .collect();
     let lower_is_better =
         |acronym: &str| doc.metrics.iter().find(|m| m.acronym == acronym).is_none_or(|m| m.lower_is_better);
-    doc.rankings = Rankings::of(&entries, lower_is_better);
+    // Equal time and the costs compare only the runs of the season's runner class.
+    let class = results::season_class(pool, set.season).await?;
+    let in_scenes: Vec<&StoredRun> = runs.iter().filter(|r| scenes.contains(&r.scene)).collect();
+    let (timed, _) = crate::leaderboard::one_runner_class(&sets, &in_scenes, class.as_deref());
+    let timed: BTreeSet<(&str, &str, i64)> =
+        timed.iter().map(|r| (r.result_id.as_str(), r.scene.as_str(), r.spp)).collect();
+    let is_timed = |e: &fbksd_exchange::results::IndexEntry| {
+        timed.contains(&(e.technique.as_str(), e.scene.as_str(), e.spp as i64))
+    };
+    doc.rankings = Rankings::of(&entries, is_timed, lower_is_better);
+    let timed_entries: Vec<_> = entries.iter().filter(|e| is_timed(e)).cloned().collect();
+    doc.runner_class = class;
     // Existence checks touch the disk once per file: off the async threads.
     let techniques = tokio::task::spawn_blocking(move || {
         sets.iter()
@@ -70,6 +81,7 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
                 name: s.technique.clone(),
                 full_name: s.full_name().to_string(),
                 citation: s.info["citation"].as_str().unwrap_or("").trim().to_string(),
+                runner_class: results::runner_class(&s.provenance["machine"]).map(str::to_string),
                 runs: runs
                     .iter()
                     .filter(|r| r.result_id == s.id && scenes.contains(&r.scene))
@@ -81,7 +93,7 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
     .await
     .map_err(ServiceError::internal)?;
     doc.techniques = techniques;
-    doc.set_costs(&entries);
+    doc.set_costs(&timed_entries);
     Ok(doc)
 }
 

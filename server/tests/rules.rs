@@ -312,6 +312,123 @@ on_both_databases!(administrators_cancel_requeue_hide_and_start_seasons, |db: Db
     assert_eq!(board(1).await["standings"][0]["result_id"], result_id.as_str(), "the old season is kept");
 });
 
+/// A claim by `runner`, which says it is of runner class `class`.
+async fn claim_as(runner: &FakeRunner, class: &str) -> Option<common::HeldJob> {
+    runner.claim_with(json!({ "wait_seconds": 1, "runner_class": class })).await
+}
+
+on_both_databases!(
+    a_seasons_times_come_from_one_runner_class_and_its_benchmarks_go_to_its_runners,
+    |db: Db| async move {
+        const SLOW: &str = "Slow CPU · x86-64-v2 · 2 cores · 8 GiB";
+        const FAST: &str = "Fast CPU · x86-64-v4 · 2 cores · 8 GiB";
+        let server = spawn(db).await;
+        let admin = server.admin().await;
+        let ada = server.user("ada@example.org").await;
+        let (slow, fast) = (FakeRunner::register(&server, "slow").await, FakeRunner::register(&server, "fast").await);
+        let board = |season: i64| {
+            let url = server.url.clone();
+            async move { json_of(reqwest::get(format!("{url}/api/v1/leaderboard?season={season}")).await.unwrap()).await.1 }
+        };
+        let queue = |name: &'static str| {
+            let (server, ada) = (&server, &ada);
+            async move {
+                server.create_project(ada, name, "private").await;
+                let repo = technique_repository("box-filter-python");
+                assert!(push(repo.path(), &server.clone_url(name, &ada.token), &["FBKSD_RUN"]).0);
+            }
+        };
+
+        // While the season names no class, any runner takes its benchmarks; the
+        // first result measured on a named class names the season's.
+        queue("first").await;
+        queue("second").await;
+        let on_slow = claim_as(&slow, SLOW).await.expect("no class named yet: any runner");
+        let on_fast = claim_as(&fast, FAST).await.expect("no class named yet: any runner");
+        let mut published = Vec::new();
+        for (runner, job, class) in [(&slow, on_slow, SLOW), (&fast, on_fast, FAST)] {
+            common::upload_results_on(runner, &job, 1.0, json!({ "cpu_model": class, "class": class })).await;
+            let id =
+                job.finish(runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string();
+            ada.api(Method::POST, format!("{}/api/v1/results/{id}/publish", server.url)).send().await.unwrap();
+            published.push(id);
+        }
+        let season_one = board(1).await;
+        assert_eq!(season_one["runner_class"], SLOW);
+        // The set measured on the faster class is ranked at equal spp only, and the board says why.
+        let standing = |id: &str| {
+            season_one["standings"].as_array().unwrap().iter().find(|s| s["result_id"] == id).unwrap().clone()
+        };
+        assert_eq!(standing(&published[0])["mean_rank_time"], 1.0, "{season_one}");
+        assert!(standing(&published[1])["mean_rank_time"].is_null(), "{season_one}");
+        assert_eq!(standing(&published[1])["mean_rank"], 1.5, "ties at equal spp: the same numbers");
+        let note = season_one["left_out"][0].as_str().unwrap_or_default();
+        assert!(
+            note.contains("1 result set(s) measured on another runner class") && note.ends_with(SLOW),
+            "{season_one}"
+        );
+        // So does its viewer: no equal-time place, no cost, its class named.
+        let viewer = json_of(
+            ada.api(Method::GET, format!("{}/api/v1/results/{}/viewer", server.url, published[1]))
+                .send()
+                .await
+                .unwrap(),
+        )
+        .await
+        .1;
+        assert_eq!(viewer["runner_class"], SLOW);
+        let technique =
+            |id: &str| viewer["techniques"].as_array().unwrap().iter().find(|t| t["key"] == id).unwrap().clone();
+        assert_eq!(technique(&published[1])["runner_class"], FAST);
+        assert!(technique(&published[1])["runs"].as_array().unwrap().iter().all(|r| r["cost_ms"] == 0.0), "{viewer}");
+        let places = |at: &str| -> Vec<Value> {
+            viewer["rankings"][at]
+                .as_array()
+                .unwrap()
+                .iter()
+                .flat_map(|c| c["places"].as_array().unwrap().clone())
+                .collect()
+        };
+        assert!(places("equal_spp").iter().any(|p| p["technique"] == published[1].as_str()));
+        assert!(!places("equal_time").is_empty());
+        assert!(places("equal_time").iter().all(|p| p["technique"] == published[0].as_str()), "{viewer}");
+
+        // From then on its benchmarks wait for a runner of that class, and
+        // the home page says so while none of that class is connected.
+        let home = || async { reqwest::get(format!("{}/", server.url)).await.unwrap().text().await.unwrap() };
+        let page = home().await;
+        assert!(
+            page.contains("No connected runner is of this season") && page.contains(&format!("({SLOW})")),
+            "{page}"
+        );
+        let (status, _) = slow.post("runners/status", json!({ "preparing": null, "machine": { "class": SLOW } })).await;
+        assert_eq!(status, 204);
+        assert!(!home().await.contains("No connected runner is of this season"), "{}", home().await);
+        queue("third").await;
+        assert!(claim_as(&fast, FAST).await.is_none(), "a runner of another class is not handed it");
+        assert!(fast.claim(1).await.is_none(), "nor one that names no class");
+        let job = claim_as(&slow, SLOW).await.expect("a runner of the season's class takes it");
+        assert_eq!(job.body["job"]["season"], 1);
+
+        // A season started for new hardware names its class: its re-runs go there.
+        let (status, season) = json_of(
+            admin
+                .api(Method::POST, format!("{}/api/v1/admin/seasons", server.url))
+                .json(&json!({ "note": "the fleet moved to new machines", "runner_class": FAST }))
+                .send()
+                .await
+                .unwrap(),
+        )
+        .await;
+        assert_eq!((status, season["queued"].as_array().unwrap().len()), (201, 2), "{season}");
+        assert!(claim_as(&slow, SLOW).await.is_none(), "the old class does not take the new season's re-run");
+        let rerun = claim_as(&fast, FAST).await.expect("the new class does");
+        assert_eq!(rerun.body["job"]["season"], 2);
+        assert_eq!(board(2).await["runner_class"], FAST);
+        assert_eq!(board(1).await["runner_class"], SLOW, "the old season keeps its class");
+    }
+);
+
 on_both_databases!(deleting_an_account_deletes_its_projects_and_unpublished_results_only, |db: Db| async move {
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;

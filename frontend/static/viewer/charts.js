@@ -25,6 +25,9 @@
   FBKSD.TIME_MEASURES = TIME_MEASURES;
   // The time axis of a chart: at equal time always the ranking's, the cost.
   FBKSD.timeMeasure = (kind, measure) => TIME_MEASURES[kind === "equal_time" ? "cost" : measure] || TIME_MEASURES.cost;
+  // Times are CPU times of one runner class: a technique measured on
+  // another would be compared on its machine, not on its work.
+  FBKSD.otherRunnerClass = (doc, t) => Boolean(doc.runner_class) && t.runner_class !== doc.runner_class;
 
   // The series of a chart: [{key, name, colour, points: [{x, y, spp}]}].
   // kind: "spp", "time" or "equal_time" (whose points are the ranking's
@@ -45,7 +48,9 @@
           .filter((p) => p.x > 0)
           .sort((a, b) => a.x - b.x);
       }
-      return { key: t.key, name: FBKSD.techniqueLabel(t), colour: FBKSD.colourOf(i), points };
+      const otherClass = kind !== "spp" && FBKSD.otherRunnerClass(doc, t);
+      const name = FBKSD.techniqueLabel(t) + (otherClass ? " (another runner class: not on the time axis)" : "");
+      return { key: t.key, name, colour: FBKSD.colourOf(i), points: otherClass ? [] : points };
     });
   };
 

@@ -124,7 +124,7 @@
         row.append(cell("td", FBKSD.techniqueLabel(t)), cell("td", String(r.spp), "num"), status);
         const cv = (spread) => (spread && r.seeds > 1 ? " (CV " + (spread.cv * 100).toFixed(1) + " %)" : "");
         const timing = r.timing || {};
-        for (const v of [String(r.seeds || 1), ms(r.cost_ms), ms(r.technique_cpu_ms) + cv(timing.technique_cpu), ms(r.startup_ms), ms(r.technique_ms) + cv(timing.technique), ms(r.time_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
+        for (const v of [String(r.seeds || 1), FBKSD.otherRunnerClass(doc, t) ? "other runner class" : ms(r.cost_ms), ms(r.technique_cpu_ms) + cv(timing.technique_cpu), ms(r.startup_ms), ms(r.technique_ms) + cv(timing.technique), ms(r.time_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
           row.append(cell("td", v, "num"));
         }
         for (const m of doc.metrics) {

@@ -84,12 +84,14 @@ pub fn write(results: &ResultsDir, scenes: &BTreeMap<String, SceneMeta>, out: &P
             name: technique.to_string(),
             full_name: technique.to_string(),
             citation: String::new(),
+            runner_class: None,
             runs,
         });
     }
     let lower_is_better =
         |acronym: &str| doc.metrics.iter().find(|m| m.acronym == acronym).is_none_or(|m| m.lower_is_better);
-    doc.rankings = Rankings::of(&index.runs, lower_is_better);
+    // One machine measured every run of a results directory.
+    doc.rankings = Rankings::of(&index.runs, |_| true, lower_is_better);
     doc.set_costs(&index.runs);
     let json = serde_json::to_string(&doc)?;
     std::fs::write(out.join("data.js"), format!("window.FBKSD_DOCUMENT = {json};\n"))?;

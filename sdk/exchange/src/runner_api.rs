@@ -144,6 +144,10 @@ pub struct RunnerCredentials {
 pub struct StatusReport {
     /// What it prepares, for people (e.g. "making reference 3 of 8: …"); `None` when ready.
     pub preparing: Option<String>,
+    /// Its machine now, when it says it is ready (its class and calibration
+    /// may have changed since it registered).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub machine: Option<serde_json::Value>,
 }
 
 /// What a runner can take, and how long the claim may wait on the server.
@@ -161,6 +165,10 @@ pub struct ClaimRequest {
     /// Only reference jobs (a runner still preparing its scene pool).
     #[serde(default)]
     pub references_only: bool,
+    /// The runner's class (fbksd-ci's machine `class`): a benchmark job of
+    /// a season whose times come from another class is not handed to it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub runner_class: Option<String>,
 }
 
 /// A claimed job.

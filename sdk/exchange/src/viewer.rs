@@ -55,6 +55,11 @@ pub struct ViewerData {
     /// its ranking has the ties and the rule of [`crate::ranking`].
     #[serde(default)]
     pub rankings: Rankings,
+    /// The runner class the document's times come from, when the runs were
+    /// measured on more than one machine: the time charts leave out the
+    /// techniques measured on another ([`ViewerTechnique::runner_class`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub runner_class: Option<String>,
 }
 
 /// The ranking cells of a document.
@@ -67,11 +72,18 @@ pub struct Rankings {
 }
 
 impl Rankings {
-    /// The cells of `runs`, whose `technique` is the document's technique key.
-    pub fn of(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool + Copy) -> Rankings {
+    /// The cells of `runs`, whose `technique` is the document's technique
+    /// key: equal spp over all of them, equal time over those `timed` keeps
+    /// (the runs measured on one runner class).
+    pub fn of(
+        runs: &[IndexEntry],
+        timed: impl Fn(&IndexEntry) -> bool,
+        lower_is_better: impl Fn(&str) -> bool + Copy,
+    ) -> Rankings {
+        let timed: Vec<IndexEntry> = runs.iter().filter(|r| timed(r)).cloned().collect();
         Rankings {
             equal_spp: crate::ranking::equal_spp(runs, lower_is_better).cells,
-            equal_time: crate::ranking::equal_time(runs, lower_is_better).cells,
+            equal_time: crate::ranking::equal_time(&timed, lower_is_better).cells,
         }
     }
 }
@@ -105,6 +117,7 @@ impl ViewerData {
             scenes: Vec::new(),
             techniques: Vec::new(),
             rankings: Rankings::default(),
+            runner_class: None,
         }
     }
 }
@@ -135,6 +148,9 @@ pub struct ViewerTechnique {
     pub full_name: String,
     /// Citation, if any.
     pub citation: String,
+    /// The runner class its runs were measured on, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub runner_class: Option<String>,
     /// Its runs.
     pub runs: Vec<ViewerRun>,
 }

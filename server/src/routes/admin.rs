@@ -71,6 +71,10 @@ pub async fn rotate_registration_token(
 #[serde(deny_unknown_fields)]
 pub struct NewSeason {
     note: String,
+    /// The runner class its times come from (default: that of its first
+    /// result measured on a named class).
+    #[serde(default)]
+    runner_class: Option<String>,
 }
 
 /// `POST /api/v1/admin/seasons`: the scene pool changed. Starts a season
@@ -81,5 +85,5 @@ pub async fn new_season(
     Admin(_): Admin,
     Json(body): Json<NewSeason>,
 ) -> Result<(StatusCode, Json<crate::admin::SeasonStarted>), ApiError> {
-    Ok((StatusCode::CREATED, Json(crate::admin::start_season(&state, &body.note).await?)))
+    Ok((StatusCode::CREATED, Json(crate::admin::start_season(&state, &body.note, body.runner_class.as_deref()).await?)))
 }

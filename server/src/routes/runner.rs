@@ -39,6 +39,9 @@ pub async fn status(
 ) -> Result<StatusCode, ApiError> {
     let preparing = body.preparing.map(|p| p.chars().take(300).collect::<String>());
     crate::runners::set_status(&state.pool, &runner_id, preparing.as_deref()).await?;
+    if let Some(machine) = &body.machine {
+        crate::runners::set_machine(&state.pool, &runner_id, machine).await?;
+    }
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -61,7 +64,7 @@ pub async fn claim(
         let mut claimed =
             crate::jobs::claim_reference(pool, postgres, &runner_id, lease_ms, &request.reference_keys).await?;
         if claimed.is_none() && !request.references_only {
-            claimed = crate::jobs::claim(pool, postgres, &runner_id, lease_ms).await?;
+            claimed = crate::jobs::claim(pool, postgres, &runner_id, lease_ms, request.runner_class.as_deref()).await?;
         }
         if let Some(claimed) = claimed {
             let job = claimed.job;

@@ -422,7 +422,13 @@ pub fn results_upload(quality: f64) -> serde_json::Value {
 
 /// Uploads the files and results of [`results_upload`] for `job`.
 pub async fn upload_results(runner: &FakeRunner, job: &HeldJob, quality: f64) {
-    let upload = results_upload(quality);
+    upload_results_on(runner, job, quality, serde_json::json!({ "cpu_model": "test CPU", "cores": 2 })).await;
+}
+
+/// [`upload_results`], measured on `machine` (its provenance's record of the runner's machine).
+pub async fn upload_results_on(runner: &FakeRunner, job: &HeldJob, quality: f64, machine: serde_json::Value) {
+    let mut upload = results_upload(quality);
+    upload["provenance"]["machine"] = machine;
     for run in upload["runs"].as_array().unwrap() {
         let name = run["image"].as_str().unwrap();
         let status =

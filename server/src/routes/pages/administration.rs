@@ -101,7 +101,7 @@ pub async fn admin_season(
 ) -> PageResult {
     visitor.check(&form.csrf_token)?;
     admin_of(&visitor.0)?;
-    let started = crate::admin::start_season(&state, &form.note).await?;
+    let started = crate::admin::start_season(&state, &form.note, None).await?;
     let text = format!("Season {} started; {} techniques queued again.", started.season, started.queued.len());
     Ok(message(visitor.0, "New season", text))
 }

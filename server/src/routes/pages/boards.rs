@@ -70,6 +70,8 @@ struct BoardPage {
     groups: Vec<GroupView>,
     /// Scenes whose runs against an earlier reference were left out.
     left_out: Vec<String>,
+    /// The runner class the season's times come from (empty: none named yet).
+    runner_class: String,
     /// Shown on the public board while it is empty.
     how_to: Option<HowTo>,
     /// What the service still prepares (home page only).
@@ -148,7 +150,11 @@ async fn board_template(
                         Some(cv) => format!("{:.1} ms (CV {:.1} %)", e.technique_ms, cv * 100.0),
                         None => format!("{:.1} ms", e.technique_ms),
                     },
-                    cost: format!("{:.1} ms", e.cost_ms),
+                    cost: if e.cost_ms.is_finite() {
+                        format!("{:.1} ms", e.cost_ms)
+                    } else {
+                        "other runner class".into()
+                    },
                 })
                 .collect(),
             scene: g.scene.clone(),
@@ -196,6 +202,7 @@ async fn board_template(
         standings,
         groups,
         left_out: board.left_out.clone(),
+        runner_class: board.runner_class.clone().unwrap_or_default(),
         viewer_tags: fbksd_exchange::viewer::asset_tags("/static/viewer/"),
     };
     Ok(page)

@@ -227,7 +227,7 @@ async fn preparation(state: &AppState, user: Option<&User>) -> Result<Vec<String
             Some(format!("Runner {}: {status}, for {elapsed}; jobs wait in the queue meanwhile.", r.name))
         })
         .collect();
-    Ok(match (user, preparing.len()) {
+    let mut lines = match (user, preparing.len()) {
         (_, 0) => Vec::new(),
         (Some(_), _) => preparing,
         (None, n) if n == connected.len() => {
@@ -235,7 +235,18 @@ async fn preparation(state: &AppState, user: Option<&User>) -> Result<Vec<String
                 .into()]
         }
         (None, _) => Vec::new(),
-    })
+    };
+    // A season's benchmarks go only to runners of its class (see `jobs::claim`).
+    let season = crate::results::current_season(&state.pool).await?;
+    if let Some(class) = crate::results::season_class(&state.pool, season).await? {
+        if !connected.iter().any(|r| crate::results::runner_class(&r.machine) == Some(class.as_str())) {
+            lines.push(format!(
+                "No connected runner is of this season's runner class ({class}): benchmarks wait in the queue \
+                 until one is, or until an administrator starts a season for the runners' class."
+            ));
+        }
+    }
+    Ok(lines)
 }
 
 /// Unix ms as a UTC date and time.
