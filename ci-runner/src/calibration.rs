@@ -39,8 +39,36 @@ pub struct Calibration {
     pub measured_at: i64,
 }
 
-/// Times the workload [`REPEATS`] times on the calling thread (it blocks
-/// for a quarter of a second or so: call it off async threads).
+/// Times the workload [`REPEATS`] times on a thread of its own pinned to
+/// `cpus` (the runner's cores, where its jobs run; unpinned where the
+/// kernel refuses). It blocks for a quarter of a second or so: call it off
+/// async threads.
+pub fn measure_on(cpus: &[usize]) -> Calibration {
+    let cpus = cpus.to_vec();
+    std::thread::spawn(move || {
+        pin_to(&cpus);
+        measure()
+    })
+    .join()
+    .unwrap_or_else(|e| std::panic::resume_unwind(e))
+}
+
+fn pin_to(cpus: &[usize]) {
+    // SAFETY: cpu_set_t is plain data; CPU_SET stays within it (cores
+    // beyond CPU_SETSIZE are skipped); sched_setaffinity reads it and
+    // pins the calling thread (pid 0) only.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        for &cpu in cpus.iter().filter(|&&c| c < libc::CPU_SETSIZE as usize) {
+            libc::CPU_SET(cpu, &mut set);
+        }
+        if !cpus.is_empty() && libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+            tracing::warn!("calibration: could not pin to cores {cpus:?}: {}", std::io::Error::last_os_error());
+        }
+    }
+}
+
+/// Times the workload [`REPEATS`] times on the calling thread.
 pub fn measure() -> Calibration {
     workload(); // warms the caches and the allocator
     let mut cpu = Vec::with_capacity(REPEATS);
@@ -126,7 +154,8 @@ mod tests {
     #[test]
     fn the_workload_is_the_same_work_every_time_and_its_times_are_positive() {
         assert_eq!(super::workload().to_bits(), super::workload().to_bits());
-        let calibration = super::measure();
+        // Pinned to core 0 (every machine has one), as a runner pins it to its cores.
+        let calibration = super::measure_on(&[0]);
         assert_eq!(calibration.workload, super::WORKLOAD);
         assert_eq!(calibration.runs, super::REPEATS);
         assert!(calibration.cpu_ms > 0.0 && calibration.wall_ms > 0.0, "{calibration:?}");

@@ -116,13 +116,7 @@ pub struct RoleCores {
 /// Splits a cpuset of four cores or more into two disjoint halves; `None`
 /// for fewer cores (both then share them) or a malformed list.
 pub fn split_cpus(cpuset: &str) -> Option<RoleCores> {
-    let mut cpus = Vec::new();
-    for part in cpuset.split(',') {
-        match part.split_once('-') {
-            Some((a, b)) => cpus.extend(a.trim().parse::<usize>().ok()?..=b.trim().parse::<usize>().ok()?),
-            None => cpus.push(part.trim().parse::<usize>().ok()?),
-        }
-    }
+    let cpus = cpus_of(cpuset)?;
     if cpus.len() < 4 {
         return None;
     }
@@ -133,17 +127,25 @@ pub fn split_cpus(cpuset: &str) -> Option<RoleCores> {
 
 /// The number of cores a cpuset list names (`0-3,6` → 5); `None` when malformed.
 pub fn count_cpus(cpuset: &str) -> Option<usize> {
-    let mut n = 0;
+    cpus_of(cpuset).map(|cpus| cpus.len())
+}
+
+/// The cores a cpuset list names (`0-3,6` → 0, 1, 2, 3, 6); `None` when malformed.
+pub fn cpus_of(cpuset: &str) -> Option<Vec<usize>> {
+    let mut cpus = Vec::new();
     for part in cpuset.split(',') {
-        n += match part.split_once('-') {
-            Some((a, b)) => b.trim().parse::<usize>().ok()?.checked_sub(a.trim().parse::<usize>().ok()?)? + 1,
-            None => {
-                part.trim().parse::<usize>().ok()?;
-                1
+        match part.split_once('-') {
+            Some((a, b)) => {
+                let (a, b) = (a.trim().parse::<usize>().ok()?, b.trim().parse::<usize>().ok()?);
+                if b < a {
+                    return None;
+                }
+                cpus.extend(a..=b);
             }
-        };
+            None => cpus.push(part.trim().parse::<usize>().ok()?),
+        }
     }
-    Some(n)
+    Some(cpus)
 }
 
 #[cfg(test)]

@@ -75,7 +75,7 @@ impl Runner {
             .map_err(|e| anyhow::anyhow!("scene root {}: {e}", config.scene_root.display()))?;
         let api = Api::new(&config.server);
         let machine = Machine::probe(config.cpus.as_deref(), config.cpu_quota);
-        let calibration = calibrate().await;
+        let calibration = calibrate(&machine).await;
         // Registered first, so the server can show what is being prepared.
         let credentials = identity(&config, &api, &machine.record(&calibration)).await?;
         let scene_dirs = config.scene_dirs()?;
@@ -220,16 +220,18 @@ impl Runner {
         }
         remove_job_dir(&ctx.sandbox, &ctx.images, &dir).await;
         // Between jobs, so the next result says how fast this runner is now.
-        let calibration = calibrate().await;
+        let calibration = calibrate(&ctx.machine).await;
         if let Ok(mut kept) = ctx.calibration.lock() {
             *kept = calibration;
         }
     }
 }
 
-/// Times the calibration workload off the async threads.
-async fn calibrate() -> Calibration {
-    tokio::task::spawn_blocking(crate::calibration::measure)
+/// Times the calibration workload off the async threads, on the cores the
+/// jobs run on.
+async fn calibrate(machine: &Machine) -> Calibration {
+    let cpus = crate::machine::cpus_of(&machine.cpuset).unwrap_or_default();
+    tokio::task::spawn_blocking(move || crate::calibration::measure_on(&cpus))
         .await
         .unwrap_or_else(|e| std::panic::resume_unwind(e.into_panic()))
 }

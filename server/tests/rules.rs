@@ -410,22 +410,36 @@ on_both_databases!(
         let job = claim_as(&slow, SLOW).await.expect("a runner of the season's class takes it");
         assert_eq!(job.body["job"]["season"], 1);
 
-        // A season started for new hardware names its class: its re-runs go there.
-        let (status, season) = json_of(
-            admin
-                .api(Method::POST, format!("{}/api/v1/admin/seasons", server.url))
-                .json(&json!({ "note": "the fleet moved to new machines", "runner_class": FAST }))
-                .send()
-                .await
-                .unwrap(),
-        )
-        .await;
-        assert_eq!((status, season["queued"].as_array().unwrap().len()), (201, 2), "{season}");
+        // The administration page says the season's class and offers the
+        // connected runners' classes for a new season, started for new
+        // hardware: its re-runs go there.
+        let (status, _) = fast.post("runners/status", json!({ "preparing": null, "machine": { "class": FAST } })).await;
+        assert_eq!(status, 204);
+        let page = admin.browser.get(format!("{}/admin", server.url)).send().await.unwrap().text().await.unwrap();
+        assert!(page.contains(&format!("id=\"season-class\">{SLOW}</span>")), "{page}");
+        assert!(page.contains(&format!("<option value=\"{FAST}\">")), "{page}");
+        let form =
+            [("csrf_token", admin.csrf.as_str()), ("note", "the fleet moved to new machines"), ("runner_class", FAST)];
+        let started = admin.browser.post(format!("{}/admin/seasons", server.url)).form(&form).send().await.unwrap();
+        let text = started.text().await.unwrap();
+        assert!(text.contains("Season 2 started; 2 techniques queued again."), "{text}");
         assert!(claim_as(&slow, SLOW).await.is_none(), "the old class does not take the new season's re-run");
         let rerun = claim_as(&fast, FAST).await.expect("the new class does");
         assert_eq!(rerun.body["job"]["season"], 2);
         assert_eq!(board(2).await["runner_class"], FAST);
         assert_eq!(board(1).await["runner_class"], SLOW, "the old season keeps its class");
+        // The API names one the same way.
+        let (status, season) = json_of(
+            admin
+                .api(Method::POST, format!("{}/api/v1/admin/seasons", server.url))
+                .json(&json!({ "note": "back to the old machines", "runner_class": SLOW }))
+                .send()
+                .await
+                .unwrap(),
+        )
+        .await;
+        assert_eq!(status, 201, "{season}");
+        assert_eq!(board(3).await["runner_class"], SLOW);
     }
 );
 

@@ -13,7 +13,10 @@
   // {overall: Map key→mean rank, perScene: Map scene→Map key→mean rank,
   //  ties: Map key→cells tied}.
   FBKSD.rank = function (doc, scenes, metric, kind) {
-    const n = doc.techniques.length;
+    // A missing place counts as last among the techniques the cells rank
+    // (at equal time, those of the season's runner class), as on the board.
+    const ranked = kind === "equal_time" ? doc.techniques.filter((t) => !FBKSD.otherRunnerClass(doc, t)) : doc.techniques;
+    const n = ranked.length;
     const cells = ((doc.rankings && doc.rankings[kind || "equal_spp"]) || []).filter((c) => c.metric === metric && scenes.has(c.scene));
     const sums = new Map(), perScene = new Map(), ties = new Map();
     const add = (map, key, rank) => {

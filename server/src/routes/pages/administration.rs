@@ -17,6 +17,10 @@ struct AdminPage {
     runners: Vec<RunnerRow>,
     jobs: Vec<JobRow>,
     season: i64,
+    /// The class the current season's times come from, once named.
+    season_class: Option<String>,
+    /// The classes of the registered runners, for the new season's.
+    runner_classes: Vec<String>,
 }
 
 fn admin_of(nav: &Nav) -> Result<&User, PageError> {
@@ -31,8 +35,14 @@ fn admin_of(nav: &Nav) -> Result<&User, PageError> {
 pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) -> PageResult {
     admin_of(&nav)?;
     let now = crate::now_ms();
-    let runners = crate::runners::all(&state.pool)
-        .await?
+    let all = crate::runners::all(&state.pool).await?;
+    let runner_classes: Vec<String> = all
+        .iter()
+        .filter_map(|r| crate::results::runner_class(&r.machine).map(str::to_string))
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let runners = all
         .into_iter()
         .map(|r| RunnerRow {
             healthy: r.healthy(&state.config, now),
@@ -44,7 +54,8 @@ pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) ->
         .collect();
     let jobs = crate::jobs::all(&state.pool, 200).await?.iter().map(job_row).collect();
     let season = crate::results::current_season(&state.pool).await?;
-    Ok(render(&AdminPage { nav, runners, jobs, season }))
+    let season_class = crate::results::season_class(&state.pool, season).await?;
+    Ok(render(&AdminPage { nav, runners, jobs, season, season_class, runner_classes }))
 }
 
 /// `POST /admin/jobs/{id}/requeue`.
@@ -91,6 +102,9 @@ pub async fn admin_hide(
 pub struct SeasonForm {
     csrf_token: String,
     note: String,
+    /// Empty: the season's first result names it.
+    #[serde(default)]
+    runner_class: String,
 }
 
 /// `POST /admin/seasons`.
@@ -101,7 +115,7 @@ pub async fn admin_season(
 ) -> PageResult {
     visitor.check(&form.csrf_token)?;
     admin_of(&visitor.0)?;
-    let started = crate::admin::start_season(&state, &form.note, None).await?;
+    let started = crate::admin::start_season(&state, &form.note, Some(&form.runner_class)).await?;
     let text = format!("Season {} started; {} techniques queued again.", started.season, started.queued.len());
     Ok(message(visitor.0, "New season", text))
 }
