@@ -98,7 +98,13 @@ fn every_instruction_set_renders_a_scene_as_the_cpus_best_does() {
             _ => true,
         })
         .collect();
-    for scene in ["cornell-box", "glossy-spheres", "hair"] {
+    // Hair's curves are intersected by Embree's own kernels, whose SSE2 and
+    // AVX2 versions differ in the last bits (FMA), and its thin-hair paths
+    // are chaotic: an ulp decides some hits, so paths diverge. On an AMD
+    // EPYC (AVX2), SSE2 against AVX2 moved a quarter of hair's pixels and
+    // its mean by 1.1e-4, a fortieth of the render's own noise (standard
+    // error of the mean 4.7e-3): hair is held to 1e-3, the rest to 1e-4.
+    for (scene, tolerance) in [("cornell-box", 1e-4), ("glossy-spheres", 1e-4), ("hair", 1e-3)] {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join(format!("../../scenes/production/{scene}/small.pbrt"));
         let render = |isa: Option<&str>| {
@@ -118,7 +124,7 @@ fn every_instruction_set_renders_a_scene_as_the_cpus_best_does() {
             let image = render(Some(isa));
             assert!(image.iter().all(|v| v.is_finite()), "{scene} on {isa}");
             let (a, b) = (mean(&best), mean(&image));
-            assert!((a - b).abs() <= 1e-4 * a, "{scene} on {isa}: mean {b} against {a}");
+            assert!((a - b).abs() <= tolerance * a, "{scene} on {isa}: mean {b} against {a}");
         }
     }
 }
