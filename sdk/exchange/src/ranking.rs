@@ -17,9 +17,10 @@
 //!   the technique's CPU time, start-up excluded, and its samples at the
 //!   scene's render rate). A scene's time points are, at each budget of its
 //!   sweep, the cost of the cheapest technique at that budget, with its cost
-//!   by seed (the point's noise). A technique whose cost at one of its
-//!   budgets cannot be told apart from the point's ([`stats::same_cost`])
-//!   is given that budget's result there: the same program under two names
+//!   by seed. A technique whose cost at one of its budgets cannot be told
+//!   apart from the point's ([`stats::same_cost`], on the noise of every
+//!   cost at the scene, pooled: [`stats::CostNoise`]) is given that
+//!   budget's result there: the same program under two names
 //!   ties at equal time as it does at equal samples. Otherwise its error is
 //!   read off its own error-against-cost curve (linear in log–log between
 //!   the two budgets around the point), seed by seed, never extrapolated: a
@@ -29,10 +30,11 @@
 //!
 //! [`stats::differ`]: crate::stats::differ
 //! [`stats::same_cost`]: crate::stats::same_cost
+//! [`stats::CostNoise`]: crate::stats::CostNoise
 
 use crate::cost::Costs;
 use crate::results::IndexEntry;
-use crate::stats::{differ, mean, median, same_cost, Samples};
+use crate::stats::{differ, mean, median, same_cost, CostNoise, Samples};
 use crate::RunStatus;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -164,10 +166,11 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
         let metrics: BTreeSet<&str> = entries.iter().flat_map(|t| t.run.metrics.keys().map(String::as_str)).collect();
         let budgets: Vec<(&str, Vec<&Timed>)> =
             techniques.iter().map(|t| (*t, entries.iter().filter(|e| e.run.technique == *t).collect())).collect();
+        let noise = CostNoise::pooled(entries.iter().map(|t| &t.by_seed));
         for point in time_points(&entries) {
             // Where each technique's value at this point comes from, the same for every metric.
             let sources: Vec<(&str, Source)> =
-                budgets.iter().filter_map(|(t, runs)| Some((*t, source(runs, point)?))).collect();
+                budgets.iter().filter_map(|(t, runs)| Some((*t, source(runs, point, noise)?))).collect();
             for &metric in &metrics {
                 let values: Vec<(&str, Samples, Option<u64>)> = sources
                     .iter()
@@ -232,14 +235,14 @@ enum Source<'a, 'b> {
 
 /// Where the value of a technique with these runs (in budget order) at
 /// `point` comes from: a budget whose cost cannot be told apart from the
-/// point's ([`same_cost`]; the nearest, if several), else its curve, when
-/// the point lies within it; `None` when it lies beyond the noise outside
-/// the curve (never extrapolated).
-fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed) -> Option<Source<'a, 'b>> {
+/// point's at the scene's `noise` ([`same_cost`]; the nearest, if
+/// several), else its curve, when the point lies within it; `None` when it
+/// lies beyond the noise outside the curve (never extrapolated).
+fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed, noise: CostNoise) -> Option<Source<'a, 'b>> {
     let distance = |t: &Timed| (t.ms / point.ms).ln().abs();
     let nearest = runs
         .iter()
-        .filter(|t| same_cost(&t.by_seed, &point.by_seed))
+        .filter(|t| same_cost(&t.by_seed, &point.by_seed, noise))
         .min_by(|a, b| distance(a).total_cmp(&distance(b)));
     if let Some(t) = nearest {
         return Some(Source::Budget(t));
@@ -572,6 +575,32 @@ mod tests {
         assert_eq!(time.standings[0].technique, "plain");
         // At equal samples they are the same program.
         assert!(equal_spp(&runs, |_| true).cells.iter().all(|c| c.places.iter().all(|p| p.place == 1.5)));
+    }
+
+    #[test]
+    fn a_costlier_technique_never_gets_a_point_a_cheaper_one_misses() {
+        // An AMD EPYC board: the box filter twice, with extra work once (steady) and
+        // twice (noisy); the same images. Judged pair by pair, the noisy double was
+        // "at" the copies' 4 spp point and the steadier single was not: it ranked below.
+        let mse4 = [0.4, 0.5, 0.45];
+        let mse16 = [0.1, 0.12, 0.11];
+        let mut runs = Vec::new();
+        for (name, c4, c16) in [
+            ("copy-a", [205.0, 212.0, 210.0], [830.0, 835.0, 828.0]),
+            ("copy-b", [209.0, 211.0, 208.0], [832.0, 829.0, 836.0]),
+            ("heavy", [236.0, 238.0, 240.0], [950.0, 945.0, 952.0]),
+            ("doubled", [210.0, 268.0, 330.0], [1060.0, 1075.0, 1065.0]),
+        ] {
+            runs.push(costly(name, "s", 4, &mse4, &c4));
+            runs.push(costly(name, "s", 16, &mse16, &c16));
+        }
+        let time = equal_time(&runs, |_| true);
+        let first = &time.cells[0];
+        assert_eq!(first.missing, ["doubled"], "{first:?}");
+        assert!(first.places.iter().all(|p| p.place == 2.0 && p.spp == Some(4)), "{first:?}");
+        let rank = |t: &str| time.standings.iter().find(|s| s.technique == t).unwrap().mean_rank;
+        assert!(rank("heavy") < rank("doubled"), "{:?}", time.standings);
+        assert_eq!(rank("copy-a"), rank("copy-b"));
     }
 
     #[test]

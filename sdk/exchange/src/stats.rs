@@ -8,7 +8,7 @@
 //! not the noise the seeds share.
 
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// Below this relative difference two values are equal whatever their
 /// noise: float rounding (a C++ and a Python box filter agree to 8 digits
@@ -157,34 +157,90 @@ pub fn differ(a: &Samples, b: &Samples) -> bool {
     t > t_quantile_975(diffs.len() - 1)
 }
 
-/// Whether two runs' costs (by sample seed) cannot be told apart: their
-/// medians differ by at most [`COST_FLOOR`] (relative), or the paired
-/// t-test over the log-ratios of the seeds they share does not reject "the
-/// same cost" at the 1 % level. Costs pair by seed because the manager runs
-/// one seed of every technique back to back: a machine whose speed drifts
-/// moves both alike. 1 % rather than the values' 5 %, because a false
-/// "faster" decides every equal-time cell of the point, where a false
-/// "better" decides one; with one shared seed only the floor ties.
-pub fn same_cost(a: &Samples, b: &Samples) -> bool {
+/// How much a run's cost moves from seed to seed at one scene, the
+/// machine's noise: the standard deviation of a log cost once each run's own
+/// level and each seed's shared drift are taken out (the residual of the
+/// additive model log cost = run + seed), pooled over every run there with
+/// two seeds or more, and its degrees of freedom (0: no estimate).
+///
+/// Pooled, because the noise is the machine's (the scheduler, other work,
+/// frequency), not the technique's, and three seeds of one pair are too few
+/// to measure it: judged pair by pair on its own two degrees of freedom, a
+/// technique whose cost happened to scatter more was "at the time point"
+/// more readily than a steadier and cheaper one, which then had no result
+/// there, and ranked below it (an AMD EPYC board, 2026-12: the box filter
+/// with twice the extra work above the one with the extra work once).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CostNoise {
+    /// Standard deviation of a log cost (about the cost's CV).
+    pub sd: f64,
+    /// Degrees of freedom of `sd`.
+    pub df: usize,
+}
+
+impl CostNoise {
+    /// The noise of these runs' costs (by seed) at one scene.
+    pub fn pooled<'a>(runs: impl IntoIterator<Item = &'a Samples>) -> CostNoise {
+        let logs: Vec<BTreeMap<u64, f64>> = runs
+            .into_iter()
+            .map(|r| r.iter().filter(|(_, v)| **v > 0.0 && v.is_finite()).map(|(s, v)| (*s, v.ln())).collect())
+            .filter(|r: &BTreeMap<u64, f64>| r.len() >= 2)
+            .collect();
+        let seeds: BTreeSet<u64> = logs.iter().flat_map(|r| r.keys().copied()).collect();
+        let n: usize = logs.iter().map(BTreeMap::len).sum();
+        let Some(df) = (n + 1).checked_sub(logs.len() + seeds.len()).filter(|df| *df > 0 && !logs.is_empty()) else {
+            return CostNoise::default();
+        };
+        // Least squares of the additive model by alternating means (backfitting),
+        // which also fits runs that lack some seeds.
+        let mut level: Vec<f64> = logs.iter().map(|r| r.values().sum::<f64>() / r.len() as f64).collect();
+        let mut drift: BTreeMap<u64, f64> = BTreeMap::new();
+        for _ in 0..100 {
+            drift = seeds
+                .iter()
+                .map(|s| {
+                    let d: Vec<f64> = logs.iter().zip(&level).filter_map(|(r, l)| Some(r.get(s)? - l)).collect();
+                    (*s, d.iter().sum::<f64>() / d.len() as f64)
+                })
+                .collect();
+            level = logs.iter().map(|r| r.iter().map(|(s, x)| x - drift[s]).sum::<f64>() / r.len() as f64).collect();
+        }
+        let drift = &drift;
+        let squares: f64 =
+            logs.iter().zip(&level).flat_map(|(r, l)| r.iter().map(move |(s, x)| (x - l - drift[s]).powi(2))).sum();
+        CostNoise { sd: (squares / df as f64).sqrt(), df }
+    }
+}
+
+/// Whether two runs' costs (by sample seed) cannot be told apart at a
+/// scene whose costs scatter as `noise`: the mean log-ratio of the seeds
+/// they share (of their medians, when they share none) is within
+/// [`COST_FLOOR`], or within what the noise explains at the 1 % level
+/// (Student's t on the pooled degrees of freedom). Costs pair by seed
+/// because the manager runs one seed of every technique back to back: a
+/// machine whose speed drifts moves both alike. 1 % rather than the
+/// values' 5 %, because a false "faster" decides every equal-time cell of
+/// the point, where a false "better" decides one. With one noise for the
+/// scene, the answer depends only on the cost ratio and the seeds shared:
+/// of two techniques at one point, the cheaper is at it whenever the
+/// costlier is.
+pub fn same_cost(a: &Samples, b: &Samples, noise: CostNoise) -> bool {
     let (ma, mb) = (median(a), median(b));
     if !(ma > 0.0 && mb > 0.0) {
         return ma == mb;
-    }
-    if (ma / mb).ln().abs() <= COST_FLOOR.ln_1p() {
-        return true;
     }
     let ratios: Vec<f64> = a
         .iter()
         .filter_map(|(seed, va)| b.get(seed).filter(|vb| *va > 0.0 && **vb > 0.0).map(|vb| (va / vb).ln()))
         .collect();
-    if ratios.len() < 2 {
+    let d = if ratios.is_empty() { (ma / mb).ln() } else { ratios.iter().sum::<f64>() / ratios.len() as f64 };
+    if d.abs() <= COST_FLOOR.ln_1p() {
+        return true;
+    }
+    if ratios.is_empty() || noise.df == 0 {
         return false;
     }
-    let (d, sd) = mean_sd(&ratios);
-    if sd == 0.0 {
-        return false;
-    }
-    d.abs() / (sd / (ratios.len() as f64).sqrt()) <= t_quantile_995(ratios.len() - 1)
+    d.abs() <= t_quantile_995(noise.df) * noise.sd * (2.0 / ratios.len() as f64).sqrt()
 }
 
 /// The median of a cell entry's values (0 for none).
@@ -241,20 +297,49 @@ mod tests {
 
     #[test]
     fn costs_tie_within_the_floor_or_the_noise() {
-        // The same program twice: 1 % apart on the median, noisy seeds.
-        assert!(same_cost(&samples(&[100.0, 103.0, 98.0]), &samples(&[101.0, 99.0, 100.5])));
-        // 5 % apart, but the seeds' noise is larger than that.
-        assert!(same_cost(&samples(&[100.0, 130.0, 80.0]), &samples(&[105.0, 90.0, 120.0])));
-        // Twice the work, whatever the noise pattern.
-        assert!(!same_cost(&samples(&[100.0, 103.0, 98.0]), &samples(&[200.0, 199.0, 204.0])));
-        // 10 % apart with 1 % noise: different.
-        assert!(!same_cost(&samples(&[100.0, 101.0, 99.0, 100.5]), &samples(&[110.0, 111.0, 109.5, 110.0])));
-        // One shared seed: only the floor ties.
-        assert!(same_cost(&samples(&[100.0]), &samples(&[101.0])));
-        assert!(!same_cost(&samples(&[100.0]), &samples(&[110.0])));
+        let noise = |sd: f64| CostNoise { sd, df: 10 };
+        // The same program twice: 1 % apart, whatever the noise.
+        assert!(same_cost(&samples(&[100.0, 103.0, 98.0]), &samples(&[101.0, 99.0, 100.5]), noise(0.0)));
+        // 5 % apart, on a scene where costs scatter by 20 %.
+        assert!(same_cost(&samples(&[100.0, 130.0, 80.0]), &samples(&[105.0, 90.0, 120.0]), noise(0.2)));
+        // Twice the work, or 10 % more with 1 % noise: different.
+        assert!(!same_cost(&samples(&[100.0, 103.0, 98.0]), &samples(&[200.0, 199.0, 204.0]), noise(0.02)));
+        assert!(!same_cost(
+            &samples(&[100.0, 101.0, 99.0, 100.5]),
+            &samples(&[110.0, 111.0, 109.5, 110.0]),
+            noise(0.01)
+        ));
+        // One shared seed is judged on the scene's noise too.
+        assert!(same_cost(&samples(&[100.0]), &samples(&[110.0]), noise(0.05)));
+        assert!(!same_cost(&samples(&[100.0]), &samples(&[110.0]), noise(0.01)));
+        // Without an estimate of the noise, only the floor ties.
+        assert!(same_cost(&samples(&[100.0]), &samples(&[101.0]), CostNoise::default()));
+        assert!(!same_cost(&samples(&[100.0, 130.0]), &samples(&[115.0, 140.0]), CostNoise::default()));
         // Nothing measured on both sides is the same; on one side only, not.
-        assert!(same_cost(&Samples::new(), &Samples::new()));
-        assert!(!same_cost(&samples(&[0.0]), &samples(&[10.0])));
+        assert!(same_cost(&Samples::new(), &Samples::new(), noise(0.1)));
+        assert!(!same_cost(&samples(&[0.0]), &samples(&[10.0]), noise(0.1)));
+    }
+
+    #[test]
+    fn the_pooled_noise_leaves_out_what_runs_and_seeds_share() {
+        // Two runs, three seeds, the second seed 20 % slower for both: no noise left.
+        let a = samples(&[100.0, 120.0, 110.0]);
+        let b = samples(&[200.0, 240.0, 220.0]);
+        let exact = CostNoise::pooled([&a, &b]);
+        assert_eq!(exact.df, 2);
+        assert!(exact.sd < 1e-12, "{exact:?}");
+        // For one pair, a log-ratio scatters as twice the pooled variance: sd(log a/b) = √2 sd.
+        let c = samples(&[205.0, 230.0, 224.0]);
+        let pair = CostNoise::pooled([&a, &c]);
+        let ratios: Vec<f64> = a.values().zip(c.values()).map(|(x, y)| (x / y).ln()).collect();
+        assert!((pair.sd * 2f64.sqrt() - mean_sd(&ratios).1).abs() < 1e-9, "{pair:?}");
+        // A run with one seed says nothing about the noise; one missing a seed still does.
+        let holey: Samples = [(0, 50.0), (2, 51.0)].into();
+        let more = CostNoise::pooled([&a, &c, &samples(&[70.0]), &holey]);
+        assert_eq!(more.df, 3);
+        assert!(more.sd > 0.0 && more.sd < 0.1, "{more:?}");
+        // Nothing to pool from.
+        assert_eq!(CostNoise::pooled([&samples(&[1.0]), &samples(&[2.0])]), CostNoise::default());
     }
 
     #[test]
