@@ -262,13 +262,25 @@ pub async fn token_job(pool: &AnyPool, token: &str) -> Result<Option<(String, Jo
     row.map(|r| Ok((r.try_get("id")?, state_of(&r)?, r.try_get("attempts")?))).transpose()
 }
 
-/// Extends a running job's lease.
+/// Extends a running job's lease, and records that its runner reported.
 pub async fn heartbeat(pool: &AnyPool, job_id: &str, lease_ms: i64) -> Result<(), sqlx::Error> {
+    let now = now_ms();
     sqlx::query("UPDATE jobs SET lease_expires_at = $1 WHERE id = $2 AND state = 'running'")
-        .bind(now_ms() + lease_ms)
+        .bind(now + lease_ms)
         .bind(job_id)
         .execute(pool)
         .await?;
+    // A runner busy with a long job asks for no other: its job's heartbeats
+    // are what say it is connected (else the home page would say no runner
+    // is, minutes into every benchmark).
+    sqlx::query(
+        "UPDATE runners SET last_seen_at = $1 \
+         WHERE id = (SELECT runner_id FROM jobs WHERE id = $2 AND state = 'running')",
+    )
+    .bind(now)
+    .bind(job_id)
+    .execute(pool)
+    .await?;
     Ok(())
 }
 

@@ -254,6 +254,13 @@ on_both_databases!(administrators_cancel_requeue_hide_and_start_seasons, |db: Db
     assert_eq!(runners[0]["runner"]["running_jobs"], 1);
     assert_eq!(runners[0]["healthy"], true);
     assert_eq!(runners[0]["runner"]["machine"]["cpu_model"], "test CPU");
+    // A runner busy with one job claims no other: the job's heartbeats keep it connected.
+    let seen_at_claim = runners[0]["runner"]["last_seen_at"].as_i64().unwrap();
+    tokio::time::sleep(std::time::Duration::from_millis(5)).await; // the next millisecond, at least
+    assert_eq!(job.send(&runner, Method::POST, "heartbeat", "".into()).await, 200);
+    let (_, runners) =
+        json_of(admin.api(Method::GET, format!("{}/api/v1/admin/runners", server.url)).send().await.unwrap()).await;
+    assert!(runners[0]["runner"]["last_seen_at"].as_i64().unwrap() > seen_at_claim, "{runners}");
 
     // Cancel a running job: the runner learns it at its next report.
     let cancelled =
