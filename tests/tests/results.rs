@@ -3,6 +3,7 @@
 
 use fbksd_tests::{bin, python_path, scene_meta, sdk};
 use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn fbksd(args: &[&str]) -> (bool, String, String) {
@@ -218,15 +219,10 @@ fn two_scenes_with_one_name_are_refused() {
     assert!(!ok && err.contains("two scenes are named \"twin\""), "{err}");
 }
 
-/// The equal-time rule against noise, as `fbksd run` is used: the same
-/// program under two names ties at equal samples and at equal time (its
-/// copies' costs differ only by noise), and the same program with a busy
-/// loop that doubles its work ranks below it at equal time, while tying at
-/// equal samples (its images are the same).
-#[test]
-fn equal_time_ties_copies_and_ranks_doubled_work_below() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scenes/bands");
+/// A small procedural scene of sine bands (160×120, 4 and 16 spp) under
+/// `root/scenes/bands`, with its reference.
+fn bands_scene(root: &Path) -> PathBuf {
+    let scene = root.join("scenes/bands");
     std::fs::create_dir_all(&scene).unwrap();
     std::fs::write(
         scene.join("bands.expr"),
@@ -237,6 +233,18 @@ fn equal_time_ties_copies_and_ranks_doubled_work_below() {
     scene_meta(&scene, "bands", "bands.expr", "procedural", &[4, 16], 160, 120);
     let out = Command::new(bin("fbksd-procedural")).arg("reference").arg(&scene).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    scene
+}
+
+/// The equal-time rule against noise, as `fbksd run` is used: the same
+/// program under two names ties at equal samples and at equal time (its
+/// copies' costs differ only by noise), and the same program with a busy
+/// loop that doubles its work ranks below it at equal time, while tying at
+/// equal samples (its images are the same).
+#[test]
+fn equal_time_ties_copies_and_ranks_doubled_work_below() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = bands_scene(dir.path());
     let results = dir.path().join("results");
     let r = results.to_str().unwrap();
     // Thirty rounds of arithmetic per sample weigh about as much as rendering it.
@@ -275,4 +283,42 @@ fn equal_time_ties_copies_and_ranks_doubled_work_below() {
     }
     assert_eq!(rank("equal_time", "a"), rank("equal_time", "b"), "copies tie at equal time: {costs:?}\n{cells}");
     assert!(rank("equal_time", "doubled") > rank("equal_time", "a"), "doubled work ranks below: {costs:?}\n{cells}");
+}
+
+/// More seeds where they decide (`fbksd run --max-repeats`): a box filter
+/// whose error moves by a seed-dependent few per cent ties the box filter
+/// on three seeds (t = 2.0 where 4.3 would show a difference), so the runs
+/// behind that tie are made again, three seeds to six to twelve, where the
+/// difference shows (t = 2.8 > 2.2) and it ranks below at equal samples.
+/// The copies' equal values never ask for a seed.
+#[test]
+fn more_seeds_settle_a_tie_too_close_to_call() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = bands_scene(dir.path());
+    let results = dir.path().join("results");
+    let r = results.to_str().unwrap();
+    let technique = |name: &str, mode: &str| format!("{name}={} {mode}", bin("fbksd-test-technique"));
+    let (a, b, jittered) =
+        (technique("a", "box-filter"), technique("b", "box-filter"), technique("jittered", "box-filter-jittered 0.03"));
+    let scene = scene.to_str().unwrap();
+    let run = ["run", "-t", &a, "-t", &b, "-t", &jittered, "-s", scene, "--repeats", "3", "--results", r];
+    let (ok, _, err) = fbksd(&[&run[..], &["--max-repeats", "12", "--metrics", "MSE"]].concat());
+    assert!(ok, "{err}");
+    assert!(err.contains("bands MSE at 4 spp: a ~ jittered"), "{err}");
+    assert!(err.contains("bands MSE at 16 spp: a ~ jittered"), "{err}");
+    assert!(err.contains("more seeds: 2 rounds"), "three seeds to six to twelve: {err}");
+    assert!(!err.contains("MSE at 4 spp: a ~ b") && !err.contains("MSE at 16 spp: a ~ b"), "{err}");
+    let s = dir.path().join("scenes");
+    let (ok, _, err) =
+        fbksd(&["results", "compute", "--results", r, "--scenes", s.to_str().unwrap(), "--metrics", "MSE"]);
+    assert!(ok, "{err}");
+    let index: serde_json::Value = serde_json::from_slice(&std::fs::read(results.join("index.json")).unwrap()).unwrap();
+    for run in index["runs"].as_array().unwrap() {
+        assert_eq!(run["repeats"].as_array().unwrap().len(), 12, "every run ties with jittered: {}", run["technique"]);
+    }
+    for cell in index["rankings"]["equal_spp"]["cells"].as_array().unwrap() {
+        let place =
+            |t: &str| cell["places"].as_array().unwrap().iter().find(|p| p["technique"] == t).unwrap()["place"].clone();
+        assert_eq!((place("a"), place("b"), place("jittered")), (1.5.into(), 1.5.into(), 3.0.into()), "{cell}");
+    }
 }

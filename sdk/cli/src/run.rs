@@ -2,8 +2,13 @@
 
 use anyhow::{bail, Context};
 use clap::Args;
+use fbksd_exchange::ranking::{At, TooClose};
 use fbksd_exchange::scenes::SceneMeta;
+use fbksd_iqa::Metric;
+use fbksd_manager::evaluation::{find_scenes, AnyMetric};
+use fbksd_manager::more_seeds::settle;
 use fbksd_manager::{Benchmark, Limits, Progress, RunRecord, RunStatus, SceneSpec, TechniqueSpec};
+use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -36,6 +41,17 @@ pub struct RunArgs {
     /// spread, and the ranking ties what the noise cannot tell apart.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     repeats: u32,
+    /// More seeds where they decide: after the repeats, the runs behind a
+    /// tie that this many seeds per run could break (in values, or in
+    /// cost at an equal-time point) are made again with the next seeds,
+    /// doubling each round, up to this many. Needs scene directories with
+    /// references: metric values are computed between rounds.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=1000))]
+    max_repeats: Option<u32>,
+    /// With --max-repeats: the built-in metrics whose ties decide,
+    /// comma-separated [default: all].
+    #[arg(long, value_delimiter = ',', requires = "max_repeats")]
+    metrics: Vec<String>,
 }
 
 fn technique_spec(arg: &str) -> anyhow::Result<TechniqueSpec> {
@@ -99,6 +115,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         let spps = if args.spp.is_empty() { vec![1, 4, 16] } else { args.spp.clone() };
         scenes.push(SceneSpec { name, renderer_argv, spps });
     }
+    let settle = match args.max_repeats {
+        Some(cap) if cap <= args.repeats => {
+            bail!(
+                "--max-repeats {cap} must be more than --repeats {} (each run already has that many seeds)",
+                args.repeats
+            )
+        }
+        Some(cap) => Some((cap, settle_inputs(&args)?)),
+        None => None,
+    };
     let limits = Limits { time_limit: (!args.time_limit.is_zero()).then_some(args.time_limit), ..Limits::default() };
     let benchmark = Benchmark {
         techniques,
@@ -109,13 +135,111 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         repeats: args.repeats,
     };
     let live = std::io::stderr().is_terminal();
-    let records = benchmark.run(|p| report(p, live))?;
+    let mut records = benchmark.run(|p| report(p, live))?;
+    if let Some((cap, (scenes, metrics))) = settle {
+        records.extend(more_seeds(&benchmark, &scenes, &metrics, cap, live)?);
+    }
     print_summary(&records);
     eprintln!("results in {}", args.results.display());
     if records.iter().any(|r| r.status != RunStatus::Ok) {
         std::process::exit(2);
     }
     Ok(())
+}
+
+/// The scenes (with their references) and metrics that decide which ties
+/// are too close to call.
+fn settle_inputs(args: &RunArgs) -> anyhow::Result<(BTreeMap<String, SceneMeta>, Vec<AnyMetric>)> {
+    let mut dirs = Vec::new();
+    for path in &args.scenes {
+        if !SceneMeta::is_meta(path) {
+            bail!(
+                "--max-repeats compares metric values, so it needs scene directories with references; \
+                 {} is a plain scene file",
+                path.display()
+            );
+        }
+        dirs.push(if path.is_file() { path.parent().unwrap_or(path).to_path_buf() } else { path.clone() });
+    }
+    let scenes = find_scenes(&dirs).context("reading the scene directories")?;
+    if let Some(meta) = scenes.values().find(|m| !m.reference_file().is_file()) {
+        bail!(
+            "--max-repeats compares metric values, and scene {} has no reference at {} (build it: fbksd-{} reference {})",
+            meta.name,
+            meta.reference_file().display(),
+            meta.renderer,
+            meta.dir.display()
+        );
+    }
+    let mut metrics = Vec::new();
+    if args.metrics.is_empty() {
+        metrics.extend(Metric::ALL.iter().map(|m| AnyMetric::Builtin(*m)));
+    }
+    for name in &args.metrics {
+        let m = Metric::from_acronym(name).with_context(|| format!("unknown metric {name:?} (see fbksd iqa list)"))?;
+        metrics.push(AnyMetric::Builtin(m));
+    }
+    Ok((scenes, metrics))
+}
+
+/// Gives the runs behind ties too close to call more seeds, saying why and
+/// what it cost.
+fn more_seeds(
+    benchmark: &Benchmark,
+    scenes: &BTreeMap<String, SceneMeta>,
+    metrics: &[AnyMetric],
+    cap: u32,
+    live: bool,
+) -> anyhow::Result<Vec<RunRecord>> {
+    let mut records = Vec::new();
+    let (rounds, undecided) = settle(
+        benchmark,
+        scenes,
+        metrics,
+        cap,
+        |round| {
+            let seeds: Vec<String> = round.runs.values().map(|r| format!("{}–{}", r.start, r.end - 1)).collect();
+            eprintln!(
+                "more seeds: {} ties too close to call, {} runs get seeds {}",
+                round.close.len(),
+                round.runs.len(),
+                seeds.into_iter().collect::<std::collections::BTreeSet<_>>().into_iter().collect::<Vec<_>>().join(", ")
+            );
+            for close in &round.close {
+                eprintln!("  {}", describe(close));
+            }
+        },
+        |p| {
+            if let Progress::RunFinished(r) = &p {
+                records.push((*r).clone());
+            }
+            report(p, live)
+        },
+    )?;
+    let extra: usize = rounds.iter().map(|r| r.runs.values().map(|s| s.len()).sum::<usize>()).sum();
+    let wall: Duration = rounds.iter().map(|r| r.wall).sum();
+    match rounds.len() {
+        0 => eprintln!("more seeds: no tie too close to call at {cap} seeds per run"),
+        n => eprintln!(
+            "more seeds: {n} round{}, {extra} more runs, {:.1} s",
+            if n == 1 { "" } else { "s" },
+            wall.as_secs_f64()
+        ),
+    }
+    for close in &undecided {
+        eprintln!("  still too close at {cap} seeds: {}", describe(close));
+    }
+    Ok(records)
+}
+
+/// A tie too close to call, in a line.
+fn describe(close: &TooClose) -> String {
+    let at = match &close.at {
+        At::Spp { spp } => format!("{spp} spp"),
+        At::Time { ms, fastest, spp } => format!("{ms:.1} ms ({fastest} at {spp} spp)"),
+    };
+    let what = close.metric.as_deref().map_or("cost".to_string(), |m| m.to_string());
+    format!("{} {what} at {at}: {} ~ {}", close.scene, close.techniques[0], close.techniques[1])
 }
 
 fn report(progress: Progress<'_>, live: bool) {

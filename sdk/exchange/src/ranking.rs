@@ -34,7 +34,7 @@
 
 use crate::cost::Costs;
 use crate::results::IndexEntry;
-use crate::stats::{differ, mean, median, same_cost, CostNoise, Samples};
+use crate::stats::{could_cost_differ, could_differ, differ, mean, median, same_cost, CostNoise, Samples};
 use crate::RunStatus;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -151,6 +151,42 @@ pub fn equal_spp(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) ->
 /// technique's value at one is found.
 pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -> Ranking {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
+    let mut cells = Vec::new();
+    for_each_time_point(runs, |scene, point, _, metrics, sources| {
+        for &metric in metrics {
+            let values: Vec<(&str, Samples, Option<u64>)> = sources
+                .iter()
+                .filter_map(|(t, source)| {
+                    let (samples, spp) = source.value(metric, point.ms)?;
+                    Some((*t, samples, spp))
+                })
+                .collect();
+            let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
+            let mut cell = place(
+                scene,
+                metric,
+                at,
+                values.iter().map(|(t, s, _)| (*t, s.clone())).collect(),
+                &techniques,
+                lower_is_better(metric),
+            );
+            for p in &mut cell.places {
+                p.spp = values.iter().find(|(t, ..)| *t == p.technique).and_then(|(.., spp)| *spp);
+            }
+            cells.push(cell);
+        }
+    });
+    standings(&techniques, cells)
+}
+
+/// Calls `visit` with every time point of every scene: the scene, the
+/// point, the scene's cost noise, its metrics, and where each technique's
+/// value there comes from (techniques with no value there left out).
+fn for_each_time_point<'a>(
+    runs: &'a [IndexEntry],
+    mut visit: impl FnMut(&'a str, &Timed<'a>, CostNoise, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),
+) {
+    let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
     let costs = Costs::of(runs);
     let mut by_scene: BTreeMap<&str, Vec<Timed>> = BTreeMap::new();
     for run in runs.iter().filter(|r| r.status == RunStatus::Ok) {
@@ -160,7 +196,6 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
             by_scene.entry(&run.scene).or_default().push(timed);
         }
     }
-    let mut cells = Vec::new();
     for (scene, mut entries) in by_scene {
         entries.sort_by_key(|t| t.run.spp);
         let metrics: BTreeSet<&str> = entries.iter().flat_map(|t| t.run.metrics.keys().map(String::as_str)).collect();
@@ -168,39 +203,127 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
             techniques.iter().map(|t| (*t, entries.iter().filter(|e| e.run.technique == *t).collect())).collect();
         let noise = CostNoise::pooled(entries.iter().map(|t| &t.by_seed));
         for point in time_points(&entries) {
-            // Where each technique's value at this point comes from, the same for every metric.
             let sources: Vec<(&str, Source)> =
                 budgets.iter().filter_map(|(t, runs)| Some((*t, source(runs, point, noise)?))).collect();
-            for &metric in &metrics {
-                let values: Vec<(&str, Samples, Option<u64>)> = sources
-                    .iter()
-                    .filter_map(|(t, source)| {
-                        Some(match source {
-                            Source::Budget(r) => (*t, r.run.samples(metric), Some(r.run.spp)),
-                            Source::Between(runs) => {
-                                let curve: Curve = runs.iter().map(|r| (r.ms, r.run.samples(metric))).collect();
-                                (*t, interpolate(&curve, point.ms)?, None)
-                            }
-                        })
-                    })
-                    .collect();
-                let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
-                let mut cell = place(
-                    scene,
-                    metric,
-                    at,
-                    values.iter().map(|(t, s, _)| (*t, s.clone())).collect(),
-                    &techniques,
-                    lower_is_better(metric),
-                );
-                for p in &mut cell.places {
-                    p.spp = values.iter().find(|(t, ..)| *t == p.technique).and_then(|(.., spp)| *spp);
+            visit(scene, point, noise, &metrics, &sources);
+        }
+    }
+}
+
+/// A run of a results index: technique, scene and budget.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct RunKey {
+    /// Technique.
+    pub technique: String,
+    /// Scene.
+    pub scene: String,
+    /// Budget.
+    pub spp: u64,
+}
+
+impl RunKey {
+    fn of(run: &IndexEntry) -> RunKey {
+        RunKey { technique: run.technique.clone(), scene: run.scene.clone(), spp: run.spp }
+    }
+}
+
+/// Two techniques tied in a cell that more seeds could tell apart
+/// ([`too_close`]), and the runs the tie rests on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TooClose {
+    /// Scene.
+    pub scene: String,
+    /// The metric whose values tie; `None` when it is the cost (a
+    /// technique's budget "at" a time point only within the noise), which
+    /// decides every metric's cell at the point.
+    pub metric: Option<String>,
+    /// Budget or time point.
+    pub at: At,
+    /// The two techniques.
+    pub techniques: [String; 2],
+    /// The runs whose seeds decide it.
+    pub runs: Vec<RunKey>,
+}
+
+/// The ties that `seeds` seeds per run could break, at equal samples and at
+/// equal time: two techniques' values tie ([`differ`]) but would differ at
+/// `seeds` shared seeds if their difference and its spread held
+/// ([`could_differ`]), or a technique's budget is at a time point only
+/// because the noise cannot yet rule it out ([`could_cost_differ`]). The
+/// same program twice has equal values and never appears; nor does a tie
+/// already at `seeds` seeds.
+///
+/// [`could_differ`]: crate::stats::could_differ
+/// [`could_cost_differ`]: crate::stats::could_cost_differ
+pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
+    let mut found = Vec::new();
+    let mut cells: BTreeMap<SppCell, Vec<(&IndexEntry, Samples)>> = BTreeMap::new();
+    for r in runs {
+        for metric in r.metrics.keys() {
+            cells.entry((&r.scene, r.spp, metric)).or_default().push((r, r.samples(metric)));
+        }
+    }
+    for ((scene, spp, metric), values) in cells {
+        let values: Vec<_> = values.into_iter().filter(|(_, s)| comparable(s)).collect();
+        for (i, (a, sa)) in values.iter().enumerate() {
+            for (b, sb) in &values[i + 1..] {
+                if could_differ(sa, sb, seeds) {
+                    found.push(TooClose {
+                        scene: scene.to_string(),
+                        metric: Some(metric.to_string()),
+                        at: At::Spp { spp },
+                        techniques: [a.technique.clone(), b.technique.clone()],
+                        runs: vec![RunKey::of(a), RunKey::of(b)],
+                    });
                 }
-                cells.push(cell);
             }
         }
     }
-    standings(&techniques, cells)
+    for_each_time_point(runs, |scene, point, noise, metrics, sources| {
+        let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
+        for (t, source) in sources {
+            if let Source::Budget(r) = source {
+                if could_cost_differ(&r.by_seed, &point.by_seed, noise, seeds) {
+                    found.push(TooClose {
+                        scene: scene.to_string(),
+                        metric: None,
+                        at: at.clone(),
+                        techniques: [t.to_string(), point.run.technique.clone()],
+                        runs: vec![RunKey::of(r.run), RunKey::of(point.run)],
+                    });
+                }
+            }
+        }
+        for &metric in metrics {
+            let values: Vec<(&str, &Source, Samples)> = sources
+                .iter()
+                .filter_map(|(t, source)| Some((*t, source, source.value(metric, point.ms)?.0)))
+                .filter(|(.., s)| comparable(s))
+                .collect();
+            for (i, (ta, a, sa)) in values.iter().enumerate() {
+                for (tb, b, sb) in &values[i + 1..] {
+                    if could_differ(sa, sb, seeds) {
+                        found.push(TooClose {
+                            scene: scene.to_string(),
+                            metric: Some(metric.to_string()),
+                            at: at.clone(),
+                            techniques: [ta.to_string(), tb.to_string()],
+                            runs: a.runs(point.ms).chain(b.runs(point.ms)).map(RunKey::of).collect(),
+                        });
+                    }
+                }
+            }
+        }
+    });
+    found
+}
+
+/// An equal-samples cell: scene, budget, metric.
+type SppCell<'a> = (&'a str, u64, &'a str);
+
+/// Whether a cell entry's values can be ranked (as [`place`] keeps them).
+fn comparable(s: &Samples) -> bool {
+    !s.is_empty() && s.values().all(|v| v.is_finite())
 }
 
 /// A technique's error-against-cost curve: (cost, values by seed), in budget order.
@@ -231,6 +354,32 @@ enum Source<'a, 'b> {
     Budget(&'b Timed<'a>),
     /// Its curve between the two budgets around the point (its runs, in budget order).
     Between(&'b [&'b Timed<'a>]),
+}
+
+impl<'a> Source<'a, '_> {
+    /// The technique's values of `metric` at time `ms` by seed, and the
+    /// budget they are the result of (`None` when read between budgets).
+    fn value(&self, metric: &str, ms: f64) -> Option<(Samples, Option<u64>)> {
+        match self {
+            Source::Budget(r) => Some((r.run.samples(metric), Some(r.run.spp))),
+            Source::Between(runs) => {
+                let curve: Curve = runs.iter().map(|r| (r.ms, r.run.samples(metric))).collect();
+                Some((interpolate(&curve, ms)?, None))
+            }
+        }
+    }
+
+    /// The runs the value at time `ms` is read from: the budget, or the two around `ms`.
+    fn runs(&self, ms: f64) -> impl Iterator<Item = &'a IndexEntry> + '_ {
+        let around = match self {
+            Source::Budget(r) => vec![r.run],
+            Source::Between(runs) => runs
+                .windows(2)
+                .find(|w| w[0].ms.min(w[1].ms) < ms && ms < w[0].ms.max(w[1].ms))
+                .map_or_else(Vec::new, |w| vec![w[0].run, w[1].run]),
+        };
+        around.into_iter()
+    }
 }
 
 /// Where the value of a technique with these runs (in budget order) at
@@ -284,8 +433,7 @@ pub fn interpolate(points: &[(f64, Samples)], t: f64) -> Option<Samples> {
 
 /// Places the techniques of one cell.
 fn place(scene: &str, metric: &str, at: At, values: Vec<CellValues>, techniques: &BTreeSet<&str>, lower: bool) -> Cell {
-    let (values, _): (Vec<_>, Vec<_>) =
-        values.into_iter().partition(|(_, s)| !s.is_empty() && s.values().all(|v| v.is_finite()));
+    let (values, _): (Vec<_>, Vec<_>) = values.into_iter().partition(|(_, s)| comparable(s));
     let means: Vec<f64> = values.iter().map(|(_, s)| mean(s)).collect();
     let better = |i: usize, j: usize| if lower { means[i] < means[j] } else { means[i] > means[j] };
     let mut places: Vec<Place> = (0..values.len())
@@ -645,5 +793,56 @@ mod tests {
         // Holey's 16 spp run lacks nothing: it ranks there, behind the negative values.
         let order: Vec<&str> = last.places.iter().map(|p| p.technique.as_str()).collect();
         assert_eq!(order, ["signed", "holey", "steady"]);
+    }
+
+    #[test]
+    fn ties_too_close_to_call_name_the_runs_more_seeds_could_settle() {
+        let costs = [10.0, 10.2, 9.9];
+        let runs = vec![
+            costly("a", "s", 4, &[1.0, 1.2, 0.9], &costs),
+            costly("copy", "s", 4, &[1.0, 1.2, 0.9], &costs),
+            // Worse on every seed, by less than three seeds can show (t = 2.2); six would (3.1).
+            costly("close", "s", 4, &[1.1, 1.45, 0.95], &costs),
+            // Worse beyond doubt.
+            costly("far", "s", 4, &[3.0, 3.3, 2.9], &costs),
+        ];
+        let close = too_close(&runs, 6);
+        let pairs: BTreeSet<(&str, &str, bool)> = close
+            .iter()
+            .map(|c| {
+                let (a, b) = (c.techniques[0].as_str(), c.techniques[1].as_str());
+                (a.min(b), a.max(b), matches!(c.at, At::Spp { .. }))
+            })
+            .collect();
+        // At equal samples and at the time point alike (the same budget), close against a and its copy only.
+        let expected: BTreeSet<(&str, &str, bool)> =
+            [("a", "close", true), ("close", "copy", true), ("a", "close", false), ("close", "copy", false)].into();
+        assert_eq!(pairs, expected, "{close:?}");
+        let spp = close.iter().find(|c| matches!(c.at, At::Spp { spp: 4 }) && c.techniques[0] == "a").unwrap();
+        assert_eq!(spp.metric.as_deref(), Some("MSE"));
+        let key = |t: &str| RunKey { technique: t.into(), scene: "s".into(), spp: 4 };
+        assert_eq!(spp.runs, [key("a"), key("close")]);
+        // At the cap, nothing is too close any more.
+        assert!(too_close(&runs, 3).is_empty());
+
+        // Costs: "pricier" is at the cheap one's time point only within the noise of three seeds.
+        let mse = [0.5, 0.6, 0.55];
+        let timed = vec![
+            costly("cheap", "t", 4, &mse, &[100.0, 104.0, 98.0]),
+            costly("pricier", "t", 4, &mse, &[114.0, 120.0, 108.0]),
+            costly("cheap", "t", 16, &[0.1, 0.12, 0.11], &[400.0, 412.0, 396.0]),
+            costly("pricier", "t", 16, &[0.1, 0.12, 0.11], &[430.0, 470.0, 420.0]),
+            // A noisy technique that makes the scene's noise (6.5 %): 12 % above ties at 3 seeds, not at 12.
+            costly("noisy", "t", 4, &mse, &[200.0, 180.0, 220.0]),
+        ];
+        let close = too_close(&timed, 12);
+        let cost: Vec<&TooClose> = close.iter().filter(|c| c.metric.is_none()).collect();
+        assert!(!cost.is_empty(), "{close:?}");
+        for c in &cost {
+            assert_eq!(c.techniques, ["pricier".to_string(), "cheap".to_string()]);
+            assert!(c.runs.iter().all(|r| r.scene == "t" && r.spp == c.runs[0].spp), "{c:?}");
+        }
+        // Equal values never ask for more.
+        assert!(close.iter().all(|c| c.metric.is_none()), "{close:?}");
     }
 }

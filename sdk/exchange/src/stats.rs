@@ -243,6 +243,47 @@ pub fn same_cost(a: &Samples, b: &Samples, noise: CostNoise) -> bool {
     d.abs() <= t_quantile_995(noise.df) * noise.sd * (2.0 / ratios.len() as f64).sqrt()
 }
 
+/// Whether more seeds could make two values that [`differ`] calls tied
+/// differ: their means are apart by more than [`ROUNDING_FLOOR`], they
+/// share fewer than `seeds` seeds, and the paired test would reject "no
+/// difference" at `seeds` shared seeds if the difference and its spread
+/// held. A tie that `seeds` seeds could not break is not worth them;
+/// values equal to the rounding floor (the same program twice) never are.
+pub fn could_differ(a: &Samples, b: &Samples, seeds: usize) -> bool {
+    if differ(a, b) {
+        return false;
+    }
+    let diffs: Vec<f64> = a.iter().filter_map(|(seed, va)| b.get(seed).map(|vb| va - vb)).collect();
+    if diffs.len() < 2 || diffs.len() >= seeds {
+        return false;
+    }
+    let (d, sd) = mean_sd(&diffs);
+    let scale = mean(a).abs().max(mean(b).abs());
+    if d.abs() <= ROUNDING_FLOOR * scale || sd == 0.0 {
+        return false;
+    }
+    d.abs() / (sd / (seeds as f64).sqrt()) > t_quantile_975(seeds - 1)
+}
+
+/// Whether more seeds could show that two costs [`same_cost`] cannot tell
+/// apart do differ: their shared seeds' mean log-ratio is beyond
+/// [`COST_FLOOR`], they share fewer than `seeds` seeds, and at `seeds`
+/// shared seeds the same ratio would be beyond what `noise` explains.
+pub fn could_cost_differ(a: &Samples, b: &Samples, noise: CostNoise, seeds: usize) -> bool {
+    if !same_cost(a, b, noise) || noise.df == 0 {
+        return false;
+    }
+    let ratios: Vec<f64> = a
+        .iter()
+        .filter_map(|(seed, va)| b.get(seed).filter(|vb| *va > 0.0 && **vb > 0.0).map(|vb| (va / vb).ln()))
+        .collect();
+    if ratios.is_empty() || ratios.len() >= seeds {
+        return false;
+    }
+    let d = ratios.iter().sum::<f64>() / ratios.len() as f64;
+    d.abs() > COST_FLOOR.ln_1p() && d.abs() > t_quantile_995(noise.df) * noise.sd * (2.0 / seeds as f64).sqrt()
+}
+
 /// The median of a cell entry's values (0 for none).
 pub fn median(samples: &Samples) -> f64 {
     Spread::of(&samples.values().copied().collect::<Vec<_>>()).map_or(0.0, |s| s.median)
@@ -349,5 +390,35 @@ mod tests {
         assert!(!differ(&a, &b));
         // A single seed cannot measure noise: any real difference counts.
         assert!(differ(&samples(&[1.0]), &samples(&[1.01])));
+    }
+
+    #[test]
+    fn more_seeds_are_asked_for_only_where_they_could_decide() {
+        let base = samples(&[1.0, 1.2, 0.9]);
+        let shifted = |d: [f64; 3]| samples(&[1.0 + d[0], 1.2 + d[1], 0.9 + d[2]]);
+        // A steady difference that 3 seeds cannot show (t = 2.2 < 4.30) and 6 would (3.1 > 2.57).
+        let close = shifted([0.1, 0.25, 0.05]);
+        assert!(!differ(&base, &close));
+        assert!(could_differ(&base, &close, 6));
+        // The same difference already at the cap: nothing more to ask.
+        assert!(!could_differ(&base, &close, 3));
+        // A difference the noise swamps even at 6 seeds (t would be 1.6).
+        assert!(!could_differ(&base, &shifted([0.1, 0.3, -0.05]), 6));
+        // The same program twice: equal values never ask for more.
+        assert!(!could_differ(&base, &base.clone(), 100));
+        // Values that already differ are decided.
+        assert!(!could_differ(&base, &shifted([1.0, 1.1, 1.05]), 6));
+
+        // Costs at a scene whose log costs scatter by 5 % (10 degrees of freedom):
+        // 3 shared seeds tie up to a ratio of e^0.129, 6 would only up to e^0.092.
+        let machine = CostNoise { sd: 0.05, df: 10 };
+        let cost = samples(&[100.0, 104.0, 98.0]);
+        let times = |r: f64| samples(&[100.0 * r, 104.0 * r, 98.0 * r]);
+        assert!(same_cost(&cost, &times(1.1), machine));
+        assert!(could_cost_differ(&cost, &times(1.1), machine, 6));
+        assert!(!could_cost_differ(&cost, &times(1.05), machine, 6), "within what 6 seeds explain");
+        assert!(!could_cost_differ(&cost, &times(1.015), machine, 100), "within the floor");
+        assert!(!could_cost_differ(&cost, &times(1.3), machine, 6), "already apart");
+        assert!(!could_cost_differ(&cost, &times(1.1), CostNoise::default(), 6), "no noise estimate");
     }
 }

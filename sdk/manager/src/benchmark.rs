@@ -14,10 +14,13 @@
 
 use crate::process::Launcher;
 use crate::scene::{Limits, SceneRunner, TechniqueLaunch};
+use fbksd_exchange::ranking::RunKey;
 use fbksd_exchange::record::{RunRecord, RunStatus};
 use fbksd_exchange::results::{path_safe_name, write_json_atomically, ResultsDir, RunFiles};
 use fbksd_iqa::image::write_exr;
+use std::collections::BTreeMap;
 use std::io;
+use std::ops::Range;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -92,10 +95,47 @@ fn run_order(techniques: usize, repeat: u32) -> impl Iterator<Item = usize> {
 
 impl Benchmark {
     /// Runs everything, writing results as each run ends.
-    pub fn run(&self, mut progress: impl FnMut(Progress<'_>) + Send) -> io::Result<Vec<RunRecord>> {
+    pub fn run(&self, progress: impl FnMut(Progress<'_>) + Send) -> io::Result<Vec<RunRecord>> {
+        let repeats = self.repeats.max(1);
+        self.run_seeds(|_, _, _| 0..repeats, progress)
+    }
+
+    /// Makes runs again with more seeds: each (technique, scene, budget) of
+    /// `runs`, by its names in the results, gets the seeds of its range,
+    /// which pair with the other techniques' runs of the same seeds. Runs
+    /// and scenes not named are not touched (a scene's renderer starts only
+    /// if one of its runs is).
+    pub fn run_more_seeds(
+        &self,
+        runs: &BTreeMap<RunKey, Range<u32>>,
+        progress: impl FnMut(Progress<'_>) + Send,
+    ) -> io::Result<Vec<RunRecord>> {
+        self.run_seeds(
+            |technique, scene, spp| {
+                let key = RunKey { technique: path_safe_name(technique), scene: path_safe_name(scene), spp };
+                runs.get(&key).cloned().unwrap_or(0..0)
+            },
+            progress,
+        )
+    }
+
+    /// Runs each (technique, scene, budget) with the seeds `seeds` gives it
+    /// (by the names given to the benchmark): budget by budget, seed by
+    /// seed, the techniques of one seed back to back.
+    fn run_seeds(
+        &self,
+        seeds: impl Fn(&str, &str, u64) -> Range<u32>,
+        mut progress: impl FnMut(Progress<'_>) + Send,
+    ) -> io::Result<Vec<RunRecord>> {
         let results = ResultsDir::create(&self.results)?;
         let mut records = Vec::new();
         for scene in &self.scenes {
+            let wanted = |spp: u64| -> Vec<Range<u32>> {
+                self.techniques.iter().map(|t| seeds(&t.name, &scene.name, spp)).collect()
+            };
+            if scene.spps.iter().all(|&spp| wanted(spp).iter().all(Range::is_empty)) {
+                continue;
+            }
             let scene_name = path_safe_name(&scene.name);
             let renderer_log = results.renderer_log(&scene_name)?;
             let mut runner = SceneRunner::new(scene.renderer_argv.clone(), Some(renderer_log), self.limits.clone())?
@@ -106,9 +146,15 @@ impl Benchmark {
                 .map(|t| results.run_dir(&path_safe_name(&t.name), &scene_name))
                 .collect::<io::Result<Vec<_>>>()?;
             for &spp in &scene.spps {
-                for repeat in 0..self.repeats.max(1) {
+                let wanted = wanted(spp);
+                let (Some(first), Some(end)) =
+                    (wanted.iter().map(|r| r.start).min(), wanted.iter().map(|r| r.end).max())
+                else {
+                    continue;
+                };
+                for repeat in first..end {
                     runner.set_seed(repeat as u64);
-                    for i in run_order(self.techniques.len(), repeat) {
+                    for i in run_order(self.techniques.len(), repeat).filter(|&i| wanted[i].contains(&repeat)) {
                         let record = self.run_once(
                             &mut runner,
                             &results,

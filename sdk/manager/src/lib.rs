@@ -12,6 +12,7 @@
 //!   directory ([`fbksd_exchange::results`]).
 //! - [`process`]: supervised child processes (CPU time and peak memory by `wait4`).
 //! - [`evaluation`]: metric values and error maps of a results directory.
+//! - [`more_seeds`]: more seeds for the runs behind ties too close to call.
 //!
 //! What its records, results directories and scene metadata look like is
 //! [`fbksd_exchange`]'s, shared with the CLI, the renderers, the runner and
@@ -37,6 +38,7 @@
 
 pub mod benchmark;
 pub mod evaluation;
+pub mod more_seeds;
 pub mod process;
 pub mod scene;
 
