@@ -12,13 +12,16 @@
 # time, then how many repetitions tied the copies at both and ranked the
 # doubled one below them at equal time. Release binaries (FBKSD_PROFILE=debug:
 # those of `cargo build --workspace`, as they are); run it on an otherwise
-# idle machine.
+# idle machine. MAX_REPEATS=M adds `--max-repeats M --metrics MSE` (more
+# seeds where they decide) and reports the runs that got more seeds.
 #
-#   [ROUNDS=N] [FBKSD_PROFILE=debug] bash deploy/bench-equal-time.sh [REPETITIONS]   # default 20
+#   [ROUNDS=N] [MAX_REPEATS=M] [FBKSD_PROFILE=debug] bash deploy/bench-equal-time.sh [REPETITIONS]   # default 20
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repetitions=${1:-20}
 rounds=${ROUNDS:-30}
+more=()
+[ -n "${MAX_REPEATS:-}" ] && more=(--max-repeats "$MAX_REPEATS" --metrics MSE)
 work=$PWD/target/bench-equal-time
 rm -rf "$work" && mkdir -p "$work"
 case "${FBKSD_PROFILE:-release}" in
@@ -36,29 +39,31 @@ for scene in "${scenes[@]}"; do
 done
 technique="$bin/fbksd-test-technique"
 
-echo "CPU: $(sed -n 's/^model name\s*: //p' /proc/cpuinfo | head -1), $(nproc) cores; ${repetitions} repetitions, ${rounds} rounds per sample"
+echo "CPU: $(sed -n 's/^model name\s*: //p' /proc/cpuinfo | head -1), $(nproc) cores; ${repetitions} repetitions, ${rounds} rounds per sample${MAX_REPEATS:+, at most $MAX_REPEATS seeds per run}"
 echo
-echo "| repetition | a, b, doubled at equal spp | a, b, doubled at equal time | copies tie at both | doubled below at equal time |"
-echo "|---|---|---|---|---|"
+echo "| repetition | a, b, doubled at equal spp | a, b, doubled at equal time | copies tie at both | doubled below at equal time | runs with more seeds | wall s |"
+echo "|---|---|---|---|---|---|---|"
 for i in $(seq 1 "$repetitions"); do
     results=$work/results-$i
-    fbksd run -t "a=$technique box-filter $rounds" -t "b=$technique box-filter $rounds" \
+    started=$EPOCHREALTIME
+    fbksd run "${more[@]}" -t "a=$technique box-filter $rounds" -t "b=$technique box-filter $rounds" \
         -t "doubled=$technique box-filter-doubled $rounds" \
         -s "${scenes[0]}" -s "${scenes[1]}" --spp 4,16 --repeats 3 --results "$results" >"$work/run-$i.log" 2>&1 &&
         fbksd results compute --results "$results" --scenes scenes --metrics MSE >>"$work/run-$i.log" 2>&1 ||
         { cat "$work/run-$i.log" >&2; exit 1; }
-    python3 - "$results/index.json" "$i" <<'PY'
+    python3 - "$results/index.json" "$i" "$started" "$EPOCHREALTIME" <<'PY'
 import json, sys
-index, i = json.load(open(sys.argv[1])), sys.argv[2]
+index, i, wall = json.load(open(sys.argv[1])), sys.argv[2], float(sys.argv[4]) - float(sys.argv[3])
 def ranks(kind):
     return {s["technique"]: s["mean_rank"] for s in index["rankings"][kind]["standings"]}
 spp, time = ranks("equal_spp"), ranks("equal_time")
 tie = spp["a"] == spp["b"] and time["a"] == time["b"]
 below = time["doubled"] > max(time["a"], time["b"])
 show = lambda r: " / ".join(f"{r[t]:.2f}" for t in ("a", "b", "doubled"))
-print(f"| {i} | {show(spp)} | {show(time)} | {'yes' if tie else 'NO'} | {'yes' if below else 'NO'} |")
+more = [f"{r['technique']} {r['scene']} {r['spp']}: {len(r['repeats'])}" for r in index["runs"] if len(r["repeats"]) > 3]
+print(f"| {i} | {show(spp)} | {show(time)} | {'yes' if tie else 'NO'} | {'yes' if below else 'NO'} | {', '.join(more) or 'none'} | {wall:.1f} |")
 PY
 done | tee "$work/table.md"
 echo
-awk -F'|' -v n="$repetitions" '$5 ~ /yes/ { tie++ } $6 ~ /yes/ { below++ }
-    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d\n", tie, n, below, n }' "$work/table.md"
+awk -F'|' -v n="$repetitions" '$5 ~ /yes/ { tie++ } $6 ~ /yes/ { below++ } $7 !~ /none/ { more++ } { wall += $8 }
+    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; more seeds in %d of %d; %.1f s per repetition\n", tie, n, below, n, more, n, wall / n }' "$work/table.md"
