@@ -50,7 +50,19 @@ impl Email {
     pub fn as_str(&self) -> &str {
         &self.0
     }
+
+    /// Whether the address is in [`SERVICE_DOMAIN`] (addresses are lower-case).
+    pub fn is_reserved(&self) -> bool {
+        self.0.rsplit_once('@').is_some_and(|(_, domain)| domain == SERVICE_DOMAIN)
+    }
 }
+
+/// The domain of the service's own accounts (the bootstrap administrator,
+/// the references' and the baselines' publishers): no user registers an
+/// address there. Were it open, whoever registered a service address first
+/// would hold it for ever (the service refuses to take over an ordinary
+/// account), and every runner that lacks a reference would stop.
+pub const SERVICE_DOMAIN: &str = "localhost.localdomain";
 
 /// A password good enough to accept: 10 to 1024 characters.
 pub struct Password(String);
@@ -160,6 +172,12 @@ fn user_of(row: &sqlx::any::AnyRow) -> Result<User, sqlx::Error> {
 
 /// Registers an unverified account and mails its verification link.
 pub async fn register(state: &crate::AppState, email: &Email, password: &Password) -> Result<User, ServiceError> {
+    if email.is_reserved() {
+        return Err(ServiceError::invalid(
+            "reserved_email",
+            format!("{} is one of the service's own addresses: register with your own", email.as_str()),
+        ));
+    }
     let user = create_user(&state.pool, email, password, false, false).await?;
     mail_verification(state, &user.id, email).await?;
     Ok(user)
@@ -236,10 +254,12 @@ pub async fn create_user(
     }
 }
 
-/// The service account at `email` (the baselines' publisher), created on
-/// first use: verified without mail, with a password nobody knows, exempt
-/// from quotas and yielding the runners to users (see `is_service`). An
-/// ordinary account at that address is refused, never taken over.
+/// The service account at `email` (the baselines' or the references'
+/// publisher), created at the server's start and on first use: verified
+/// without mail, with a password nobody knows, exempt from quotas and
+/// yielding the runners to users (see `is_service`). An ordinary account at
+/// that address (registered before [`SERVICE_DOMAIN`] was reserved) is
+/// refused, never taken over.
 pub async fn ensure_service_account(pool: &AnyPool, email: &Email) -> Result<User, ServiceError> {
     if let Some(id) = user_id_by_email(pool, email).await? {
         if !is_service(pool, &id).await? {

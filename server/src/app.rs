@@ -85,6 +85,18 @@ impl Application {
             Some((email, password))
         };
 
+        // The service accounts exist before registration opens (their domain is reserved too).
+        for address in [crate::references::ACCOUNT, crate::baselines::ACCOUNT] {
+            let email = Email::parse(address).map_err(|e| anyhow::anyhow!("{}", e.message))?;
+            if let Err(e) = accounts::ensure_service_account(&pool, &email).await {
+                tracing::error!(
+                    "{}; it was registered before the address was reserved: remove that account, \
+                     or nothing it publishes (references, baselines) can be made",
+                    e.message
+                );
+            }
+        }
+
         let registration_token =
             crate::runners::ensure_registration_token(&pool, &config.runner_registration_token.0).await?;
         let git =

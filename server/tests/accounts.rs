@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{json_of, spawn, Db};
+use common::{json_of, spawn, Db, FakeRunner};
 use serde_json::{json, Value};
 
 async fn register(client: &reqwest::Client, url: &str, email: &str, password: &str) -> reqwest::Response {
@@ -113,6 +113,27 @@ on_both_databases!(the_first_start_creates_an_administrator_once, |db: Db| async
     let body: Value = log_in(&client, &server.url, &email, &password).await.json().await.unwrap();
     assert_eq!(body["user"]["is_admin"], true);
 });
+
+/// The service's own addresses cannot be registered, in any case. Before,
+/// whoever registered `References@localhost.localdomain` first held the
+/// references' account, and every reference request answered 409 for ever.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_services_addresses_cannot_be_taken() {
+    let server = spawn(Db::Sqlite).await;
+    let client = server.browser();
+    for address in
+        ["References@localhost.localdomain", "baselines@LOCALHOST.localdomain", "someone@localhost.localdomain"]
+    {
+        let answer = register(&client, &server.url, address, "analytical engine").await;
+        let (status, body) = json_of(answer).await;
+        assert_eq!((status, body["error"].as_str()), (400, Some("reserved_email")), "{address}: {body}");
+        assert!(body["message"].as_str().unwrap().contains("register with your own"), "{body}");
+    }
+    let runner = FakeRunner::register(&server, "r").await;
+    let key = fbksd_exchange::scenes::reference_key("test renderer 1", 4, "sha256:scene");
+    let (status, body) = runner.post("runners/references", json!({ "key": key, "scene": "experimental/sphere" })).await;
+    assert_eq!((status, body["state"].as_str()), (200, Some("building")), "{body}");
+}
 
 /// Registers, verifies and logs in `email`; the browser and its CSRF token.
 async fn signed_in(server: &common::TestServer, email: &str, password: &str) -> (reqwest::Client, String) {
