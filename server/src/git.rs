@@ -17,7 +17,8 @@
 //! ([`Pushed::respond`]).
 //!
 //! Size: git itself refuses packs above `receive.maxInputSize` with a
-//! message the client prints; the bridge also caps the request body.
+//! message the client prints; the bridge also caps the request body, which
+//! it spools to disk rather than holding in memory.
 
 use axum::body::Body;
 use axum::http::{HeaderMap, Method, StatusCode};
@@ -496,14 +497,19 @@ impl GitHost {
         let is_push = rest == "git-receive-pack";
         // A cap on the body beyond git's own pack limit (`receive.maxInputSize`),
         // which answers with a message the client prints.
-        let cap = (self.max_push_bytes as usize).saturating_mul(2).saturating_add(1 << 20);
-        let body = match axum::body::to_bytes(body, cap).await {
-            Ok(b) => b,
-            Err(_) => {
+        let cap = self.max_push_bytes.saturating_mul(2).saturating_add(1 << 20);
+        let body = match spool(body, &self.root, cap).await {
+            Ok(spooled) => spooled,
+            Err(Spool::TooLarge) => {
                 return plain(
                     StatusCode::PAYLOAD_TOO_LARGE,
                     format!("push larger than the server's limit of {} bytes\n", self.max_push_bytes),
                 )
+            }
+            Err(Spool::Broken(e)) => return plain(StatusCode::BAD_REQUEST, format!("the request broke off: {e}\n")),
+            Err(Spool::Disk(e)) => {
+                tracing::error!("spooling a git request: {e}");
+                return plain(StatusCode::INTERNAL_SERVER_ERROR, "cannot store the request\n".into());
             }
         };
         // Only a push has hooks to report through.
@@ -523,7 +529,7 @@ impl GitHost {
             .env("REQUEST_METHOD", method.as_str())
             .env("QUERY_STRING", query)
             .env("CONTENT_TYPE", header("content-type"))
-            .env("CONTENT_LENGTH", body.len().to_string())
+            .env("CONTENT_LENGTH", body.length.to_string())
             .env("HTTP_CONTENT_ENCODING", header("content-encoding"))
             .env("GIT_PROTOCOL", header("git-protocol"))
             .env("REMOTE_USER", user)
@@ -550,7 +556,10 @@ impl GitHost {
         };
         tokio::spawn(async move {
             // git may answer before reading everything (a refused pack): ignore EPIPE.
-            let _ = stdin.write_all(&body).await;
+            if let Ok(mut file) = tokio::fs::File::open(body.file.path()).await {
+                let _ = tokio::io::copy(&mut file, &mut stdin).await;
+            }
+            drop(body);
         });
         // Read to the end (git would block on a full pipe), keep the start.
         let stderr_task = tokio::spawn(async move {
@@ -630,6 +639,41 @@ impl GitHost {
             false => Served::Pushed(pushed),
         }
     }
+}
+
+/// A request body on disk: git reads it from there, so a request never
+/// sits in memory whole (ten anonymous fetch requests of the cap's size
+/// would otherwise hold ten times `2 × max_push_bytes` before any git
+/// process slot is asked for).
+struct Spooled {
+    file: tempfile::NamedTempFile,
+    length: u64,
+}
+
+/// Why a body could not be spooled.
+enum Spool {
+    TooLarge,
+    Broken(axum::Error),
+    Disk(std::io::Error),
+}
+
+/// Writes `body` to a temporary file in `dir`, refusing it once it passes `cap` bytes.
+async fn spool(body: Body, dir: &Path, cap: u64) -> Result<Spooled, Spool> {
+    use futures_util::StreamExt;
+    let file = tempfile::NamedTempFile::new_in(dir).map_err(Spool::Disk)?;
+    let mut out = tokio::fs::File::from_std(file.reopen().map_err(Spool::Disk)?);
+    let mut chunks = body.into_data_stream();
+    let mut length = 0u64;
+    while let Some(chunk) = chunks.next().await {
+        let chunk = chunk.map_err(Spool::Broken)?;
+        length += chunk.len() as u64;
+        if length > cap {
+            return Err(Spool::TooLarge);
+        }
+        out.write_all(&chunk).await.map_err(Spool::Disk)?;
+    }
+    out.flush().await.map_err(Spool::Disk)?;
+    Ok(Spooled { file, length })
 }
 
 #[cfg(test)]

@@ -1,12 +1,12 @@
 //! What one client may take from the server or learn about others: security
 //! headers on every answer, a cap on live-log streams, result files
 //! streamed from disk, private result sets kept out of public jobs, result
-//! sets that belong to their project (not its name), and owner-only modes
-//! in the data directory.
+//! sets that belong to their project (not its name), owner-only modes in
+//! the data directory, and request bodies streamed rather than held.
 
 mod common;
 
-use common::{json_of, push, spawn, technique_repository, Db, FakeRunner, TestServer, TestUser};
+use common::{json_of, push, spawn, spawn_with, technique_repository, Db, FakeRunner, TestServer, TestUser};
 use reqwest::Method;
 use serde_json::{json, Value};
 use std::time::Duration;
@@ -309,4 +309,93 @@ async fn the_data_directory_is_the_owners_alone() {
     std::fs::set_permissions(data.join("fbksd.sqlite3"), std::fs::Permissions::from_mode(0o644)).unwrap();
     let _again = server.another_instance().await;
     check();
+}
+
+/// The process's peak resident memory so far, in bytes (`VmHWM`).
+fn peak_memory() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap() << 10
+}
+
+/// Sends `method path` with a body of `length` zero bytes, a megabyte at a
+/// time, as a client that never holds it whole; the answer's status (the
+/// server may answer and close before the body is all sent).
+async fn send_zeros(url: &str, method: &str, path: &str, length: u64, headers: &str) -> u16 {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let host = url.trim_start_matches("http://");
+    let mut stream = tokio::net::TcpStream::connect(host).await.unwrap();
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {length}\r\n{headers}Connection: close\r\n\r\n"
+    );
+    stream.write_all(head.as_bytes()).await.unwrap();
+    let zeros = vec![0u8; 1 << 20];
+    let mut left = length;
+    while left > 0 {
+        let n = left.min(zeros.len() as u64) as usize;
+        if stream.write_all(&zeros[..n]).await.is_err() {
+            break;
+        }
+        left -= n as u64;
+    }
+    let mut answer = Vec::new();
+    let _ = stream.read_to_end(&mut answer).await;
+    let answer = String::from_utf8_lossy(&answer);
+    answer.split(' ').nth(1).and_then(|code| code.parse().ok()).unwrap_or_else(|| panic!("no answer: {answer:?}"))
+}
+
+/// Request bodies are streamed to disk, never held whole: before, each git
+/// request was read into memory up to 2 × `max_push_bytes` + 1 MiB (also
+/// anonymous fetches of a public project, before any git slot was asked
+/// for), and each runner upload up to 256 MiB before the job's budget was
+/// charged.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn request_bodies_are_streamed_not_held() {
+    const MIB: u64 = 1 << 20;
+    let server = spawn_with(Db::Sqlite, |c| {
+        c.max_push_bytes = 32 * MIB;
+        c.max_upload_bytes = 200 * MIB;
+    })
+    .await;
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "box-filter-cpp", "public").await;
+    let repo = technique_repository("box-filter-cpp");
+    let (pushed, output) = push(repo.path(), &server.clone_url("box-filter-cpp", &ada.token), &["FBKSD_RUN"]);
+    assert!(pushed, "{output}");
+    let runner = FakeRunner::register(&server, "runner").await;
+    let job = runner.claim(5).await.expect("the benchmark job");
+    let before = peak_memory();
+
+    // Anonymous fetch requests of 60 MiB each, at once: git answers them, none is held.
+    let fetch = "/git/box-filter-cpp.git/git-upload-pack";
+    let fetch_headers = "Content-Type: application/x-git-upload-pack-request\r\n";
+    let fetches = (0..4).map(|_| send_zeros(&server.url, "POST", fetch, 60 * MIB, fetch_headers));
+    let answers = futures_util::future::join_all(fetches).await;
+    assert!(answers.iter().all(|s| *s != 413), "within the cap: {answers:?}");
+    let after_fetches = peak_memory();
+    assert!(
+        after_fetches - before < 16 * MIB,
+        "4 fetches of 60 MiB raised the peak by {} MiB",
+        (after_fetches - before) / MIB
+    );
+    // Past the cap (2 × 32 + 1 MiB), refused.
+    assert_eq!(send_zeros(&server.url, "POST", fetch, 70 * MIB, fetch_headers).await, 413);
+
+    // A runner's 150 MiB file lands whole on disk.
+    let auth = format!("Authorization: Bearer {}\r\n", job.token);
+    let file = format!("/api/v1/jobs/{}/files/sin-bands/big.exr", job.id);
+    assert_eq!(send_zeros(&server.url, "PUT", &file, 150 * MIB, &auth).await, 204);
+    let staged = server.config().data_dir.join("uploads").join(&job.id).join("sin-bands");
+    assert_eq!(std::fs::metadata(staged.join("big.exr")).unwrap().len(), 150 * MIB);
+    let after_upload = peak_memory();
+    assert!(
+        after_upload - before < 16 * MIB,
+        "a 150 MiB upload raised the peak by {} MiB",
+        (after_upload - before) / MIB
+    );
+    // The next 100 MiB pass the job's 200 MiB budget: refused there, and nothing of them kept.
+    let over = format!("/api/v1/jobs/{}/files/sin-bands/over.exr", job.id);
+    assert_eq!(send_zeros(&server.url, "PUT", &over, 100 * MIB, &auth).await, 413);
+    let left: Vec<_> = std::fs::read_dir(&staged).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left, ["big.exr"], "the refused upload left a file");
 }

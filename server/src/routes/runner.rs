@@ -18,7 +18,9 @@ use fbksd_exchange::runner_api::{
     Claim, ClaimRequest, ClaimedJob, Finished, Lease, Outcome, ReferenceRequest, ReferenceStatus, ReferenceTask,
     Registration, RunnerCredentials, StatusReport,
 };
+use futures_util::StreamExt;
 use std::time::{Duration, Instant};
+use tokio::io::AsyncWriteExt;
 
 /// `POST /api/v1/runners`.
 pub async fn register(
@@ -148,16 +150,32 @@ pub async fn append_log(State(state): State<AppState>, job: JobCaller, body: Byt
     }
 }
 
-/// Reads a request body of at most the job upload limit.
-async fn read_upload(state: &AppState, body: axum::body::Body) -> Result<Bytes, ApiError> {
-    axum::body::to_bytes(body, state.config.max_upload_bytes as usize).await.map_err(|_| {
-        ApiError::new(
-            StatusCode::PAYLOAD_TOO_LARGE,
-            "upload_too_large",
-            format!("an upload is limited to {} bytes", state.config.max_upload_bytes),
-        )
-    })
+/// Copies a request body to `out` (a staged file, or memory for the
+/// results, which are parsed), charging it to the job's upload budget as it
+/// comes, a megabyte at a time: a body past the budget is refused when it
+/// gets there, not once it is all in memory.
+async fn receive_charged(
+    state: &AppState,
+    job_id: &str,
+    body: axum::body::Body,
+    out: &mut (impl tokio::io::AsyncWrite + Unpin),
+) -> Result<(), ApiError> {
+    let mut chunks = body.into_data_stream();
+    let mut uncharged = 0usize;
+    while let Some(chunk) = chunks.next().await {
+        let chunk =
+            chunk.map_err(|e| ApiError::bad_request("upload_interrupted", format!("the upload broke off: {e}")))?;
+        uncharged += chunk.len();
+        if uncharged >= CHARGE_BLOCK {
+            charge_upload(state, job_id, std::mem::take(&mut uncharged)).await?;
+        }
+        out.write_all(&chunk).await.map_err(ApiError::internal)?;
+    }
+    charge_upload(state, job_id, uncharged).await
 }
+
+/// How much of an upload is received before it is charged.
+const CHARGE_BLOCK: usize = 1 << 20;
 
 /// Counts `bytes` against the job's upload budget, or refuses them.
 async fn charge_upload(state: &AppState, job_id: &str, bytes: usize) -> Result<(), ApiError> {
@@ -171,7 +189,11 @@ async fn charge_upload(state: &AppState, job_id: &str, bytes: usize) -> Result<(
     Ok(())
 }
 
-/// `PUT /api/v1/jobs/{id}/files/{*name}`: one file of the result set.
+/// `PUT /api/v1/jobs/{id}/files/{*name}`: one file of the result set,
+/// streamed to its staging folder and charged to the job's upload budget
+/// as it comes (a megabyte at a time), so that no upload is ever held in
+/// memory whole: a body past the budget is refused when it gets there, and
+/// its part on disk removed.
 pub async fn put_file(
     State(state): State<AppState>,
     job: JobCaller,
@@ -179,13 +201,14 @@ pub async fn put_file(
     body: axum::body::Body,
 ) -> Result<StatusCode, ApiError> {
     crate::results::check_file_name(&name)?;
-    let body = read_upload(&state, body).await?;
-    charge_upload(&state, &job.job_id, body.len()).await?;
     let path = crate::results::staging_dir(&state.config.data_dir, &job.job_id).join(&name);
-    if let Some(parent) = path.parent() {
-        tokio::fs::create_dir_all(parent).await.map_err(ApiError::internal)?;
-    }
-    tokio::fs::write(&path, &body).await.map_err(ApiError::internal)?;
+    let parent = path.parent().ok_or_else(|| ApiError::internal("a staged file without a folder"))?;
+    tokio::fs::create_dir_all(parent).await.map_err(ApiError::internal)?;
+    let partial = tempfile::NamedTempFile::new_in(parent).map_err(ApiError::internal)?;
+    let mut file = tokio::fs::File::from_std(partial.reopen().map_err(ApiError::internal)?);
+    receive_charged(&state, &job.job_id, body, &mut file).await?;
+    file.flush().await.map_err(ApiError::internal)?;
+    partial.persist(&path).map_err(ApiError::internal)?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -232,8 +255,9 @@ pub async fn put_results(
     job: JobCaller,
     body: axum::body::Body,
 ) -> Result<StatusCode, ApiError> {
-    let body = read_upload(&state, body).await?;
-    charge_upload(&state, &job.job_id, body.len()).await?;
+    let mut held = Vec::new();
+    receive_charged(&state, &job.job_id, body, &mut held).await?;
+    let body = held;
     let upload: crate::results::Upload =
         serde_json::from_slice(&body).map_err(|e| ApiError::bad_request("invalid_output", format!("results: {e}")))?;
     let staging = crate::results::staging_dir(&state.config.data_dir, &job.job_id);
