@@ -192,7 +192,7 @@ fn more_seeds(
     live: bool,
 ) -> anyhow::Result<Vec<RunRecord>> {
     let mut records = Vec::new();
-    let (rounds, undecided) = settle(
+    let rounds = settle(
         benchmark,
         scenes,
         metrics,
@@ -225,9 +225,6 @@ fn more_seeds(
             if n == 1 { "" } else { "s" },
             wall.as_secs_f64()
         ),
-    }
-    for close in &undecided {
-        eprintln!("  still too close at {cap} seeds: {}", describe(close));
     }
     Ok(records)
 }

@@ -369,14 +369,16 @@ impl<'a> Source<'a, '_> {
         }
     }
 
-    /// The runs the value at time `ms` is read from: the budget, or the two around `ms`.
+    /// The runs the value at time `ms` may be read from: the budget, or
+    /// every pair of budgets around `ms` (or at it).
     fn runs(&self, ms: f64) -> impl Iterator<Item = &'a IndexEntry> + '_ {
-        let around = match self {
+        let around: Vec<&IndexEntry> = match self {
             Source::Budget(r) => vec![r.run],
             Source::Between(runs) => runs
                 .windows(2)
-                .find(|w| w[0].ms.min(w[1].ms) < ms && ms < w[0].ms.max(w[1].ms))
-                .map_or_else(Vec::new, |w| vec![w[0].run, w[1].run]),
+                .filter(|w| w[0].ms.min(w[1].ms) <= ms && ms <= w[0].ms.max(w[1].ms))
+                .flat_map(|w| [w[0].run, w[1].run])
+                .collect(),
         };
         around.into_iter()
     }

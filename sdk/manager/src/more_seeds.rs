@@ -7,7 +7,8 @@
 //! or a budget's cost against a time point, that the paired tests would
 //! decide at the cap's seeds if it held), and gives each run behind one
 //! twice its seeds, at most the cap. It stops when nothing is too close,
-//! or every run behind what is has the cap's seeds. What it costs is the
+//! or every run behind what is has the cap's seeds. Extra seeds are runs
+//! like the others: one that fails fails its run, as with `--repeats`. What it costs is the
 //! extra runs only: at most (cap / repeats − 1) times the runs behind the
 //! close ties, never a run of a decided cell.
 
@@ -38,8 +39,9 @@ pub struct Round {
 /// Gives the runs behind ties too close to call more seeds, up to `cap`
 /// seeds per run, round by round, with metric values computed by `metrics`
 /// against the references of `scenes`; `round` hears of each round before
-/// its runs are made. Returns every round made, and the ties still too
-/// close to call at the cap (empty when every tie was decided).
+/// its runs are made. Returns every round made. A tie may still be a tie
+/// after them (its runs at the cap, or its difference gone with more
+/// seeds): the ranking then ties it, as it ties any cell within the noise.
 pub fn settle(
     bench: &Benchmark,
     scenes: &BTreeMap<String, SceneMeta>,
@@ -47,7 +49,7 @@ pub fn settle(
     cap: u32,
     mut round: impl FnMut(&Round),
     mut progress: impl FnMut(Progress<'_>) + Send,
-) -> io::Result<(Vec<Round>, Vec<TooClose>)> {
+) -> io::Result<Vec<Round>> {
     let results = ResultsDir::create(&bench.results)?;
     let mut rounds = Vec::new();
     // Ties with a technique of an earlier benchmark in the same results are not ours to settle.
@@ -71,12 +73,12 @@ pub fn settle(
                 Some((key, r.repeats.len().max(1) as u32))
             })
             .collect();
-        let Some(most) = seeds.values().max() else { return Ok((rounds, close)) };
+        let Some(most) = seeds.values().max() else { return Ok(rounds) };
         let target = (2 * most).min(cap);
         let runs: BTreeMap<RunKey, Range<u32>> =
             seeds.iter().filter(|(_, n)| **n < target).map(|(k, n)| ((*k).clone(), *n..target)).collect();
         if runs.is_empty() {
-            return Ok((rounds, close));
+            return Ok(rounds);
         }
         let mut this = Round { close, runs, failed: 0, wall: Duration::ZERO };
         round(&this);
@@ -86,8 +88,7 @@ pub fn settle(
         this.failed = records.iter().filter(|r| r.status != RunStatus::Ok).count();
         rounds.push(this);
         if records.is_empty() {
-            let close = rounds.last().map(|r| r.close.clone()).unwrap_or_default();
-            return Ok((rounds, close));
+            return Ok(rounds);
         }
     }
 }
