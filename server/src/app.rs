@@ -88,12 +88,14 @@ impl Application {
         // The service accounts exist before registration opens (their domain is reserved too).
         for address in [crate::references::ACCOUNT, crate::baselines::ACCOUNT] {
             let email = Email::parse(address).map_err(|e| anyhow::anyhow!("{}", e.message))?;
-            if let Err(e) = accounts::ensure_service_account(&pool, &email).await {
-                tracing::error!(
+            match accounts::ensure_service_account(&pool, &email).await {
+                Ok(_) => {}
+                Err(e) if e.code == "email_taken" => tracing::error!(
                     "{}; it was registered before the address was reserved: remove that account, \
                      or nothing it publishes (references, baselines) can be made",
                     e.message
-                );
+                ),
+                Err(e) => tracing::warn!("creating the service account {address}: {}", e.message),
             }
         }
 
@@ -198,7 +200,7 @@ fn keep_private(data_dir: &std::path::Path) -> std::io::Result<()> {
     use std::os::unix::fs::PermissionsExt;
     let private_dir = std::fs::Permissions::from_mode(0o700);
     std::fs::set_permissions(data_dir, private_dir.clone())?;
-    for name in ["outbox", "results", "uploads", "git", "git-hooks"] {
+    for name in ["outbox", "results", "uploads", "git", "git-hooks", "git-spool"] {
         let dir = data_dir.join(name);
         std::fs::create_dir_all(&dir)?;
         std::fs::set_permissions(&dir, private_dir.clone())?;

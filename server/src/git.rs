@@ -170,6 +170,10 @@ pub struct GitRequest<'a> {
 pub struct GitHost {
     root: PathBuf,
     hooks: PathBuf,
+    /// Request bodies and push records while a request lasts: beside the
+    /// repositories, not among them (backups copy `git/`); what a crash
+    /// left is removed at start.
+    spool: PathBuf,
     max_push_bytes: u64,
     processes: std::sync::Arc<tokio::sync::Semaphore>,
 }
@@ -178,6 +182,10 @@ pub struct GitHost {
 /// each holds memory and a core, and a flood of pushes or page views must
 /// queue, not fork without bound.
 const MAX_GIT_PROCESSES: usize = 16;
+
+/// The largest fetch request body: a fetch's negotiation (the objects it
+/// wants and has) is a few kilobytes even for long histories.
+const FETCH_REQUEST_BYTES: u64 = 16 << 20;
 
 /// How long one git read may take.
 const GIT_TIME_LIMIT: std::time::Duration = std::time::Duration::from_secs(30);
@@ -274,8 +282,17 @@ impl GitHost {
         }
         let root = data_dir.join("git");
         let hooks = data_dir.join("git-hooks");
+        let spool = data_dir.join("git-spool");
         std::fs::create_dir_all(&root)?;
         std::fs::create_dir_all(&hooks)?;
+        std::fs::create_dir_all(&spool)?;
+        // What a crash left (other instances may share the folder: only what is a day old).
+        let day_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(24 * 3600);
+        for entry in std::fs::read_dir(&spool)?.flatten() {
+            if entry.metadata().and_then(|m| m.modified()).is_ok_and(|t| t < day_ago) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
         for (name, text) in [("pre-receive", pre_receive), ("post-receive", POST_RECEIVE)] {
             let path = hooks.join(name);
             std::fs::write(&path, text)?;
@@ -309,6 +326,7 @@ impl GitHost {
         Ok(GitHost {
             root,
             hooks,
+            spool,
             max_push_bytes,
             processes: std::sync::Arc::new(tokio::sync::Semaphore::new(MAX_GIT_PROCESSES)),
         })
@@ -495,15 +513,23 @@ impl GitHost {
         let GitRequest { method, rest, query, headers } = request;
         let plain = |status: StatusCode, text: String| Served::Answered((status, text).into_response());
         let is_push = rest == "git-receive-pack";
-        // A cap on the body beyond git's own pack limit (`receive.maxInputSize`),
-        // which answers with a message the client prints.
-        let cap = self.max_push_bytes.saturating_mul(2).saturating_add(1 << 20);
-        let body = match spool(body, &self.root, cap).await {
+        // A push's body is capped beyond git's own pack limit (`receive.maxInputSize`),
+        // which answers with a message the client prints; a fetch sends only its
+        // negotiation (what it wants and has), which anyone may send for a public project.
+        let cap =
+            if is_push { self.max_push_bytes.saturating_mul(2).saturating_add(1 << 20) } else { FETCH_REQUEST_BYTES };
+        let body = match spool(body, &self.spool, cap).await {
             Ok(spooled) => spooled,
-            Err(Spool::TooLarge) => {
+            Err(Spool::TooLarge) if is_push => {
                 return plain(
                     StatusCode::PAYLOAD_TOO_LARGE,
                     format!("push larger than the server's limit of {} bytes\n", self.max_push_bytes),
+                )
+            }
+            Err(Spool::TooLarge) => {
+                return plain(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    format!("a fetch request is limited to {FETCH_REQUEST_BYTES} bytes\n"),
                 )
             }
             Err(Spool::Broken(e)) => return plain(StatusCode::BAD_REQUEST, format!("the request broke off: {e}\n")),
@@ -513,7 +539,7 @@ impl GitHost {
             }
         };
         // Only a push has hooks to report through.
-        let record = match is_push.then(|| tempfile::NamedTempFile::new_in(&self.root)).transpose() {
+        let record = match is_push.then(|| tempfile::NamedTempFile::new_in(&self.spool)).transpose() {
             Ok(r) => r,
             Err(_) => return plain(StatusCode::INTERNAL_SERVER_ERROR, "cannot create a temporary file\n".into()),
         };

@@ -542,6 +542,17 @@ pub async fn charge_upload(pool: &AnyPool, job_id: &str, bytes: usize, max: u64)
     Ok(done.rows_affected() > 0)
 }
 
+/// Gives back `bytes` charged to a job's upload budget by an upload that
+/// was not kept (it broke off, or was refused).
+pub async fn refund_upload(pool: &AnyPool, job_id: &str, bytes: usize) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE jobs SET upload_bytes = upload_bytes - $1 WHERE id = $2 AND upload_bytes >= $1")
+        .bind(bytes as i64)
+        .bind(job_id)
+        .execute(pool)
+        .await?;
+    Ok(())
+}
+
 /// Keeps a job's checked results upload until the job reports success.
 pub async fn stage_results(pool: &AnyPool, job_id: &str, upload: &str) -> Result<(), sqlx::Error> {
     sqlx::query("UPDATE jobs SET staged_results = $1 WHERE id = $2").bind(upload).bind(job_id).execute(pool).await?;

@@ -348,7 +348,7 @@ async fn send_zeros(url: &str, method: &str, path: &str, length: u64, headers: &
 /// request was read into memory up to 2 × `max_push_bytes` + 1 MiB (also
 /// anonymous fetches of a public project, before any git slot was asked
 /// for), and each runner upload up to 256 MiB before the job's budget was
-/// charged.
+/// charged. The peak is the process's (nextest runs each test in its own).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn request_bodies_are_streamed_not_held() {
     const MIB: u64 = 1 << 20;
@@ -366,20 +366,29 @@ async fn request_bodies_are_streamed_not_held() {
     let job = runner.claim(5).await.expect("the benchmark job");
     let before = peak_memory();
 
-    // Anonymous fetch requests of 60 MiB each, at once: git answers them, none is held.
-    let fetch = "/git/box-filter-cpp.git/git-upload-pack";
-    let fetch_headers = "Content-Type: application/x-git-upload-pack-request\r\n";
-    let fetches = (0..4).map(|_| send_zeros(&server.url, "POST", fetch, 60 * MIB, fetch_headers));
-    let answers = futures_util::future::join_all(fetches).await;
-    assert!(answers.iter().all(|s| *s != 413), "within the cap: {answers:?}");
-    let after_fetches = peak_memory();
+    // Push requests of 60 MiB each, at once: git answers them, none is held.
+    let git = "/git/box-filter-cpp.git";
+    use base64::Engine;
+    let basic = base64::engine::general_purpose::STANDARD.encode(format!("git:{}", ada.token));
+    let push_headers =
+        format!("Authorization: Basic {basic}\r\nContent-Type: application/x-git-receive-pack-request\r\n");
+    let receive_pack = format!("{git}/git-receive-pack");
+    let pushes = (0..4).map(|_| send_zeros(&server.url, "POST", &receive_pack, 60 * MIB, &push_headers));
+    let answers = futures_util::future::join_all(pushes).await;
+    assert!(answers.iter().all(|s| *s != 413 && *s != 401), "within the cap: {answers:?}");
+    let after_pushes = peak_memory();
     assert!(
-        after_fetches - before < 16 * MIB,
-        "4 fetches of 60 MiB raised the peak by {} MiB",
-        (after_fetches - before) / MIB
+        after_pushes - before < 16 * MIB,
+        "4 pushes of 60 MiB raised the peak by {} MiB",
+        (after_pushes - before) / MIB
     );
-    // Past the cap (2 × 32 + 1 MiB), refused.
-    assert_eq!(send_zeros(&server.url, "POST", fetch, 70 * MIB, fetch_headers).await, 413);
+    // Past the cap (2 × 32 + 1 MiB), refused; an anonymous fetch request past 16 MiB too.
+    assert_eq!(send_zeros(&server.url, "POST", &receive_pack, 70 * MIB, &push_headers).await, 413);
+    let fetch_headers = "Content-Type: application/x-git-upload-pack-request\r\n";
+    assert_eq!(send_zeros(&server.url, "POST", &format!("{git}/git-upload-pack"), 20 * MIB, fetch_headers).await, 413);
+    // Nothing of them is left beside the repositories.
+    let spool = server.config().data_dir.join("git-spool");
+    assert_eq!(std::fs::read_dir(&spool).unwrap().count(), 0, "{}", spool.display());
 
     // A runner's 150 MiB file lands whole on disk.
     let auth = format!("Authorization: Bearer {}\r\n", job.token);
@@ -398,4 +407,7 @@ async fn request_bodies_are_streamed_not_held() {
     assert_eq!(send_zeros(&server.url, "PUT", &over, 100 * MIB, &auth).await, 413);
     let left: Vec<_> = std::fs::read_dir(&staged).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(left, ["big.exr"], "the refused upload left a file");
+    // What the refused upload had charged was given back: 40 MiB more still fit.
+    let more = format!("/api/v1/jobs/{}/files/sin-bands/more.exr", job.id);
+    assert_eq!(send_zeros(&server.url, "PUT", &more, 40 * MIB, &auth).await, 204, "the budget was kept charged");
 }

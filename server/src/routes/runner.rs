@@ -153,25 +153,82 @@ pub async fn append_log(State(state): State<AppState>, job: JobCaller, body: Byt
 /// Copies a request body to `out` (a staged file, or memory for the
 /// results, which are parsed), charging it to the job's upload budget as it
 /// comes, a megabyte at a time: a body past the budget is refused when it
-/// gets there, not once it is all in memory.
+/// gets there, not once it is all in memory. The charge is given back
+/// unless the caller keeps the upload ([`Charge::keep`]).
 async fn receive_charged(
     state: &AppState,
     job_id: &str,
     body: axum::body::Body,
     out: &mut (impl tokio::io::AsyncWrite + Unpin),
-) -> Result<(), ApiError> {
-    let mut chunks = body.into_data_stream();
-    let mut uncharged = 0usize;
-    while let Some(chunk) = chunks.next().await {
-        let chunk =
-            chunk.map_err(|e| ApiError::bad_request("upload_interrupted", format!("the upload broke off: {e}")))?;
-        uncharged += chunk.len();
-        if uncharged >= CHARGE_BLOCK {
-            charge_upload(state, job_id, std::mem::take(&mut uncharged)).await?;
+) -> Result<Charge, ApiError> {
+    let mut charge = Charge { pool: state.pool.clone(), job_id: job_id.to_string(), bytes: 0, kept: false };
+    let received = async {
+        let mut chunks = body.into_data_stream();
+        let mut uncharged = 0usize;
+        while let Some(chunk) = chunks.next().await {
+            let chunk =
+                chunk.map_err(|e| ApiError::bad_request("upload_interrupted", format!("the upload broke off: {e}")))?;
+            uncharged += chunk.len();
+            if uncharged >= CHARGE_BLOCK {
+                charge_upload(state, job_id, uncharged).await?;
+                charge.bytes += std::mem::take(&mut uncharged);
+            }
+            out.write_all(&chunk).await.map_err(ApiError::internal)?;
         }
-        out.write_all(&chunk).await.map_err(ApiError::internal)?;
+        charge_upload(state, job_id, uncharged).await?;
+        charge.bytes += uncharged;
+        Ok::<(), ApiError>(())
     }
-    charge_upload(state, job_id, uncharged).await
+    .await;
+    match received {
+        Ok(()) => Ok(charge),
+        Err(e) => {
+            charge.give_back().await;
+            Err(e)
+        }
+    }
+}
+
+/// What one upload has charged to its job's budget. An upload that is not
+/// kept (it broke off, was refused or could not be written) gives it back
+/// ([`Charge::give_back`]; dropped without [`Charge::keep`], as when the
+/// client hangs up, in the background): a runner that retries a broken
+/// upload is not charged twice.
+struct Charge {
+    pool: sqlx::AnyPool,
+    job_id: String,
+    bytes: usize,
+    kept: bool,
+}
+
+impl Charge {
+    /// The upload is kept: its charge stands.
+    fn keep(mut self) {
+        self.kept = true;
+    }
+
+    /// The upload is not kept: its charge is given back now (before the
+    /// answer, so that a retry finds the budget as it was).
+    async fn give_back(mut self) {
+        self.kept = true;
+        if let Err(e) = crate::jobs::refund_upload(&self.pool, &self.job_id, self.bytes).await {
+            tracing::warn!("giving back {} upload bytes to job {}: {e}", self.bytes, self.job_id);
+        }
+    }
+}
+
+impl Drop for Charge {
+    fn drop(&mut self) {
+        if self.kept || self.bytes == 0 {
+            return;
+        }
+        let (pool, job_id, bytes) = (self.pool.clone(), std::mem::take(&mut self.job_id), self.bytes);
+        tokio::spawn(async move {
+            if let Err(e) = crate::jobs::refund_upload(&pool, &job_id, bytes).await {
+                tracing::warn!("giving back {bytes} upload bytes to job {job_id}: {e}");
+            }
+        });
+    }
 }
 
 /// How much of an upload is received before it is charged.
@@ -206,10 +263,21 @@ pub async fn put_file(
     tokio::fs::create_dir_all(parent).await.map_err(ApiError::internal)?;
     let partial = tempfile::NamedTempFile::new_in(parent).map_err(ApiError::internal)?;
     let mut file = tokio::fs::File::from_std(partial.reopen().map_err(ApiError::internal)?);
-    receive_charged(&state, &job.job_id, body, &mut file).await?;
-    file.flush().await.map_err(ApiError::internal)?;
-    partial.persist(&path).map_err(ApiError::internal)?;
-    Ok(StatusCode::NO_CONTENT)
+    let charge = receive_charged(&state, &job.job_id, body, &mut file).await?;
+    let written = match file.flush().await {
+        Ok(()) => partial.persist(&path).map_err(|e| e.error),
+        Err(e) => Err(e),
+    };
+    match written {
+        Ok(_) => {
+            charge.keep();
+            Ok(StatusCode::NO_CONTENT)
+        }
+        Err(e) => {
+            charge.give_back().await;
+            Err(ApiError::internal(e))
+        }
+    }
 }
 
 /// `GET /api/v1/jobs/{id}/references/{hash}[?buffer=NAME]`: 204 when the
@@ -253,17 +321,29 @@ pub struct ReferenceQuery {
 pub async fn put_results(
     State(state): State<AppState>,
     job: JobCaller,
-    body: axum::body::Body,
+    body_stream: axum::body::Body,
 ) -> Result<StatusCode, ApiError> {
-    let mut held = Vec::new();
-    receive_charged(&state, &job.job_id, body, &mut held).await?;
-    let body = held;
-    let upload: crate::results::Upload =
-        serde_json::from_slice(&body).map_err(|e| ApiError::bad_request("invalid_output", format!("results: {e}")))?;
-    let staging = crate::results::staging_dir(&state.config.data_dir, &job.job_id);
-    upload.check(&uploaded_files(&staging)).map_err(|e| ApiError::bad_request("invalid_output", e))?;
-    crate::jobs::stage_results(&state.pool, &job.job_id, &String::from_utf8_lossy(&body)).await?;
-    Ok(StatusCode::NO_CONTENT)
+    let mut body = Vec::new();
+    let charge = receive_charged(&state, &job.job_id, body_stream, &mut body).await?;
+    let staged = async {
+        let upload: crate::results::Upload = serde_json::from_slice(&body)
+            .map_err(|e| ApiError::bad_request("invalid_output", format!("results: {e}")))?;
+        let staging = crate::results::staging_dir(&state.config.data_dir, &job.job_id);
+        upload.check(&uploaded_files(&staging)).map_err(|e| ApiError::bad_request("invalid_output", e))?;
+        crate::jobs::stage_results(&state.pool, &job.job_id, &String::from_utf8_lossy(&body)).await?;
+        Ok::<(), ApiError>(())
+    }
+    .await;
+    match staged {
+        Ok(()) => {
+            charge.keep();
+            Ok(StatusCode::NO_CONTENT)
+        }
+        Err(e) => {
+            charge.give_back().await;
+            Err(e)
+        }
+    }
 }
 
 /// Relative paths of the files under `dir`.
