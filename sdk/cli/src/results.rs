@@ -54,15 +54,7 @@ pub fn results(command: ResultsCommand) -> anyhow::Result<()> {
         ResultsCommand::Compute { results, scenes, metrics, metric_dirs } => {
             let dir = ResultsDir::create(&results)?;
             let scenes = find_scenes(&scenes).context("reading the scene directories")?;
-            let mut chosen = Vec::new();
-            if metrics.is_empty() {
-                chosen.extend(Metric::ALL.iter().map(|m| AnyMetric::Builtin(*m)));
-            }
-            for name in &metrics {
-                let m = Metric::from_acronym(name)
-                    .with_context(|| format!("unknown metric {name:?} (see fbksd iqa list)"))?;
-                chosen.push(AnyMetric::Builtin(m));
-            }
+            let mut chosen = builtin_metrics(&metrics)?;
             for d in &metric_dirs {
                 chosen.push(AnyMetric::External(ExternalMetric::load(d)?));
             }
@@ -97,6 +89,21 @@ pub fn results(command: ResultsCommand) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// The built-in metrics named by their acronyms; all of them for none.
+pub fn builtin_metrics(names: &[String]) -> anyhow::Result<Vec<AnyMetric>> {
+    if names.is_empty() {
+        return Ok(Metric::ALL.iter().map(|m| AnyMetric::Builtin(*m)).collect());
+    }
+    names
+        .iter()
+        .map(|name| {
+            let m =
+                Metric::from_acronym(name).with_context(|| format!("unknown metric {name:?} (see fbksd iqa list)"))?;
+            Ok(AnyMetric::Builtin(m))
+        })
+        .collect()
 }
 
 fn lower_is_better(acronym: &str) -> bool {

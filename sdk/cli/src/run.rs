@@ -4,7 +4,6 @@ use anyhow::{bail, Context};
 use clap::Args;
 use fbksd_exchange::ranking::{At, TooClose};
 use fbksd_exchange::scenes::SceneMeta;
-use fbksd_iqa::Metric;
 use fbksd_manager::evaluation::{find_scenes, AnyMetric};
 use fbksd_manager::more_seeds::settle;
 use fbksd_manager::{Benchmark, Limits, Progress, RunRecord, RunStatus, SceneSpec, TechniqueSpec};
@@ -171,15 +170,7 @@ fn settle_inputs(args: &RunArgs) -> anyhow::Result<(BTreeMap<String, SceneMeta>,
             meta.dir.display()
         );
     }
-    let mut metrics = Vec::new();
-    if args.metrics.is_empty() {
-        metrics.extend(Metric::ALL.iter().map(|m| AnyMetric::Builtin(*m)));
-    }
-    for name in &args.metrics {
-        let m = Metric::from_acronym(name).with_context(|| format!("unknown metric {name:?} (see fbksd iqa list)"))?;
-        metrics.push(AnyMetric::Builtin(m));
-    }
-    Ok((scenes, metrics))
+    Ok((scenes, crate::results::builtin_metrics(&args.metrics)?))
 }
 
 /// Gives the runs behind ties too close to call more seeds, saying why and
@@ -198,12 +189,13 @@ fn more_seeds(
         metrics,
         cap,
         |round| {
-            let seeds: Vec<String> = round.runs.values().map(|r| format!("{}–{}", r.start, r.end - 1)).collect();
+            let seeds: std::collections::BTreeSet<String> =
+                round.runs.values().map(|r| format!("{}–{}", r.start, r.end - 1)).collect();
             eprintln!(
                 "more seeds: {} ties too close to call, {} runs get seeds {}",
                 round.close.len(),
                 round.runs.len(),
-                seeds.into_iter().collect::<std::collections::BTreeSet<_>>().into_iter().collect::<Vec<_>>().join(", ")
+                seeds.into_iter().collect::<Vec<_>>().join(", ")
             );
             for close in &round.close {
                 eprintln!("  {}", describe(close));

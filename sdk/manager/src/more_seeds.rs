@@ -30,8 +30,6 @@ pub struct Round {
     pub close: Vec<TooClose>,
     /// The runs made again, each with its new seeds.
     pub runs: BTreeMap<RunKey, Range<u32>>,
-    /// Of those, the runs that did not end ok.
-    pub failed: usize,
     /// Wall time of the round's runs.
     pub wall: Duration,
 }
@@ -80,12 +78,11 @@ pub fn settle(
         if runs.is_empty() {
             return Ok(rounds);
         }
-        let mut this = Round { close, runs, failed: 0, wall: Duration::ZERO };
+        let mut this = Round { close, runs, wall: Duration::ZERO };
         round(&this);
         let started = Instant::now();
         let records = bench.run_more_seeds(&this.runs, &mut progress)?;
         this.wall = started.elapsed();
-        this.failed = records.iter().filter(|r| r.status != RunStatus::Ok).count();
         rounds.push(this);
         if records.is_empty() {
             return Ok(rounds);
