@@ -50,6 +50,12 @@ impl SceneReference {
                 .is_some_and(|k| k == self.key)
     }
 
+    /// `sha256:<hex>` of the reference beside the scene, if there is one.
+    fn local_hash(&self) -> Option<String> {
+        let image = std::fs::read(self.meta.reference_file()).ok()?;
+        Some(format!("sha256:{:x}", Sha256::digest(&image)))
+    }
+
     /// "experimental/sphere (500×500, closed form sphere_time)", for people.
     fn describe(&self) -> String {
         let budget = match &self.meta.reference {
@@ -102,20 +108,27 @@ pub async fn keys(root: &Path, dirs: &[String]) -> anyhow::Result<Vec<SceneRefer
         .collect()
 }
 
-/// Makes every scene's reference present and current before the runner
-/// takes jobs: kept, downloaded from the service, or made here for the
-/// service as its reference job. Tells the server what it waits for.
+/// Makes every scene's reference present, current and the service's
+/// before the runner takes jobs: kept when it is the one the service
+/// stores, else downloaded from the service, or made here for the service
+/// as its reference job (a current one beside the scene is then only
+/// uploaded). The server refuses results scored against any other image.
+/// Tells the server what it waits for.
 pub async fn prepare(root: &Path, scenes: &[SceneReference], api: &Api, runner_token: &str) -> anyhow::Result<()> {
-    let mut missing: Vec<&SceneReference> = scenes.iter().filter(|s| !s.is_current()).collect();
-    let total = missing.len();
+    let mut missing: Vec<&SceneReference> = scenes.iter().collect();
+    let mut total = None;
     let mut made = 0;
     while !missing.is_empty() {
         let mut building = Vec::new();
-        // Made here meanwhile (as this runner's reference job): kept.
-        for scene in missing.into_iter().filter(|s| !s.is_current()) {
-            let request = ReferenceRequest { key: scene.key.clone(), scene: scene.rel.clone() };
+        for scene in missing {
+            let request = ReferenceRequest {
+                key: scene.key.clone(),
+                scene: scene.rel.clone(),
+                name: fbksd_exchange::results::path_safe_name(&scene.meta.name),
+            };
             let status = api.request_reference(runner_token, &request).await?;
             match status.state {
+                ReferenceState::Ready if scene.is_current() && scene.local_hash() == status.reference_hash => {}
                 ReferenceState::Ready => {
                     install(api, runner_token, scene, &status).await?;
                     tracing::info!("reference of {} downloaded ({})", scene.rel, status.key);
@@ -129,6 +142,7 @@ pub async fn prepare(root: &Path, scenes: &[SceneReference], api: &Api, runner_t
                 ),
             }
         }
+        let total = *total.get_or_insert(building.len());
         missing = building;
         if missing.is_empty() {
             break;

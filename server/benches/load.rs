@@ -20,9 +20,15 @@ use reqwest::Method;
 use serde_json::json;
 use std::time::{Duration, Instant};
 
-/// Results of one technique: 10 scenes × 4 budgets, values scaled by `quality`.
+/// The bench's 10 scenes.
+fn scenes() -> Vec<String> {
+    (0..10).map(|i| format!("scene-{i:02}")).collect()
+}
+
+/// Results of one technique: 10 scenes × 4 budgets, values scaled by
+/// `quality`, scored against the scenes' [`common::fake_reference`]s.
 fn upload(quality: f64) -> serde_json::Value {
-    let scenes: Vec<String> = (0..10).map(|i| format!("scene-{i:02}")).collect();
+    let scenes = scenes();
     let mut runs = Vec::new();
     for (i, scene) in scenes.iter().enumerate() {
         for spp in [4u64, 16, 64, 256] {
@@ -41,7 +47,7 @@ fn upload(quality: f64) -> serde_json::Value {
             { "acronym": "SSIM", "name": "SSIM", "reference": "", "lower_is_better": false, "has_error_map": false }
         ],
         "scenes": scenes.iter().enumerate().map(|(i, s)| json!({
-            "name": s, "tags": if i % 2 == 0 { vec!["even"] } else { vec!["odd"] }, "scene_hash": "h", "reference_hash": "r"
+            "name": s, "tags": if i % 2 == 0 { vec!["even"] } else { vec!["odd"] }, "scene_hash": common::fake_scene_hash(s), "reference_hash": common::fake_reference(s).1
         })).collect::<Vec<_>>(),
         "provenance": { "runner": "bench" }
     })
@@ -124,6 +130,9 @@ async fn main() {
     .await;
     let ada = server.user("ada@example.org").await;
     let runner = FakeRunner::register(&server, "bench").await;
+    for scene in scenes() {
+        common::stored_reference(&runner, &scene).await;
+    }
     let mut private = String::new();
     for t in 0..techniques {
         let name = format!("technique-{t:02}");

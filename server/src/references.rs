@@ -18,7 +18,7 @@ use crate::jobs::{JobKind, JobState};
 use crate::projects::Project;
 use crate::{now_ms, AppState};
 use fbksd_exchange::runner_api::{
-    is_reference_file, ReferenceRequest, ReferenceState, ReferenceStatus, REFERENCE_IMAGE, REFERENCE_NOTE,
+    is_reference_file, is_sha256, ReferenceRequest, ReferenceState, ReferenceStatus, REFERENCE_IMAGE, REFERENCE_NOTE,
 };
 use sha2::{Digest, Sha256};
 use sqlx::{AnyPool, Row};
@@ -33,9 +33,8 @@ pub const PROJECT: &str = "scene-references";
 /// Where the reference of `key` (`sha256:<64 hex digits>`) is kept, or
 /// `None` when `key` is not such a key.
 pub fn store_dir(data_dir: &Path, key: &str) -> Option<PathBuf> {
-    let hex = key.strip_prefix("sha256:")?;
-    let valid = hex.len() == 64 && hex.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b));
-    valid.then(|| data_dir.join("scene-references").join(hex))
+    let hex = key.strip_prefix("sha256:").filter(|_| is_sha256(key))?;
+    Some(data_dir.join("scene-references").join(hex))
 }
 
 fn check_key(data_dir: &Path, key: &str) -> Result<PathBuf, ServiceError> {
@@ -104,16 +103,83 @@ pub async fn request(state: &AppState, request: &ReferenceRequest) -> Result<Ref
             format!("scene {:?} must be its directory under the scene root, 1 to 200 characters", request.scene),
         ));
     }
+    let name = request.name.as_str();
+    if !name.is_empty() && (name.len() > 100 || fbksd_exchange::results::path_safe_name(name) != name) {
+        return Err(ServiceError::invalid(
+            "invalid_scene",
+            format!("scene name {name:?} must be 1 to 100 letters, digits, . - or _, as result sets name scenes"),
+        ));
+    }
     // Twice at most: a race lost to another ask finds that ask's job.
     for _ in 0..2 {
         let failed_job = match status(&state.pool, data, &request.key).await? {
-            Some(s) if s.state != ReferenceState::Failed => return Ok(s),
+            Some(s) if s.state != ReferenceState::Failed => {
+                name_scene(&state.pool, &request.key, name).await?;
+                return Ok(s);
+            }
             Some(s) => Some(s.job_id),
             None => None,
         };
         queue_job(state, &request.key, scene, failed_job.as_deref()).await?;
+        name_scene(&state.pool, &request.key, name).await?;
     }
     status(&state.pool, data, &request.key).await?.ok_or_else(|| ServiceError::internal("reference vanished"))
+}
+
+/// Records the name result sets give the scene of reference `key`, the
+/// first time a runner says it.
+async fn name_scene(pool: &AnyPool, key: &str, name: &str) -> Result<(), sqlx::Error> {
+    if !name.is_empty() {
+        sqlx::query("UPDATE scene_references SET scene_name = $1 WHERE key = $2 AND scene_name IS NULL")
+            .bind(name)
+            .bind(key)
+            .execute(pool)
+            .await?;
+    }
+    Ok(())
+}
+
+/// Checks that every scene of a runner's upload names a reference the
+/// service stores, made for a scene of that name: a result set is scored
+/// against the service's references only, so a runner cannot put a set on
+/// the board against an image of its own (the leaderboard ranks each scene
+/// against the newest set's reference) or against another scene's.
+pub async fn check_upload(pool: &AnyPool, upload: &fbksd_exchange::runner_api::Upload) -> Result<(), ServiceError> {
+    for (i, scene) in upload.scenes.iter().enumerate() {
+        let at = format!("results: scenes[{i}] ({})", scene.name);
+        let rows = sqlx::query("SELECT scene, scene_name FROM scene_references WHERE reference_hash = $1")
+            .bind(&scene.reference_hash)
+            .fetch_all(pool)
+            .await?;
+        if rows.is_empty() {
+            return Err(ServiceError::invalid(
+                "unknown_reference",
+                format!(
+                    "{at}: reference {} is not one the service stores: score runs against the references \
+                     the service hands out (POST /api/v1/runners/references)",
+                    scene.reference_hash
+                ),
+            ));
+        }
+        let (mut fits, mut made_for) = (false, Vec::new());
+        for row in &rows {
+            let name: Option<String> = row.try_get("scene_name")?;
+            fits |= name.is_none_or(|n| n == scene.name);
+            made_for.push(row.try_get::<String, _>("scene")?);
+        }
+        if fits {
+            continue;
+        }
+        return Err(ServiceError::invalid(
+            "unknown_reference",
+            format!(
+                "{at}: reference {} was made for {}, not for this scene",
+                scene.reference_hash,
+                made_for.join(", ")
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Queues a reference job for `key`: a new row, or (`failed_job`) the

@@ -22,11 +22,7 @@ pub use fbksd_exchange::runner_api::{SceneProvenance, Upload};
 /// The name of an uploaded file: letters, digits, `.`, `-`, `_` and `/`
 /// between non-empty parts, no `..`.
 pub fn check_file_name(name: &str) -> Result<(), ServiceError> {
-    let ok = !name.is_empty()
-        && name.len() <= 200
-        && name.split('/').all(|p| !p.is_empty() && p != "." && p != "..")
-        && name.chars().all(|c| c.is_ascii_alphanumeric() || "._-/".contains(c));
-    if ok {
+    if fbksd_exchange::runner_api::is_upload_file_name(name) {
         Ok(())
     } else {
         Err(ServiceError::invalid("invalid_file_name", format!("file name {name:?}: use letters, digits, . - _ and /")))

@@ -17,7 +17,7 @@ use sqlx::Row;
 use std::sync::Arc;
 
 /// An HTTP answer: the route's pattern (never the raw path, whose ids would
-/// make a series per job), the method and the status.
+/// make a series per job), the method ([`method_label`]) and the status.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct HttpLabels {
     /// `GET`, `POST`, …
@@ -26,6 +26,15 @@ pub struct HttpLabels {
     pub route: String,
     /// HTTP status.
     pub status: u16,
+}
+
+/// A request's method as a label: one of HTTP's own methods, or `other`.
+/// Anyone may send any token as a method, and each label value is a series
+/// kept for the life of the process: `curl -X AAAA…1` to `…100000` must not
+/// make a hundred thousand of them.
+pub fn method_label(method: &axum::http::Method) -> &'static str {
+    const KNOWN: [&str; 9] = ["GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS", "CONNECT", "TRACE"];
+    KNOWN.into_iter().find(|m| *m == method.as_str()).unwrap_or("other")
 }
 
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]

@@ -2,7 +2,9 @@
 //! headers on every answer, a cap on live-log streams, result files
 //! streamed from disk, private result sets kept out of public jobs, result
 //! sets that belong to their project (not its name), owner-only modes in
-//! the data directory, and request bodies streamed rather than held.
+//! the data directory, request bodies streamed rather than held, and
+//! results a runner may upload only against the service's references,
+//! every field checked.
 
 mod common;
 
@@ -33,6 +35,9 @@ async fn benchmark(
     let job = runner.claim(5).await.expect("the benchmark job");
     assert_eq!(job.body["job"]["kind"], "benchmark");
     let upload = common::results_upload(1.0);
+    for scene in ["sin-bands", "defocus-checkerboard"] {
+        common::stored_reference(&runner, scene).await;
+    }
     for run in upload["runs"].as_array().unwrap() {
         let name = run["image"].as_str().unwrap();
         let bytes = if name == "sin-bands/4_0.png" { image.clone() } else { b"\x89PNG fake".to_vec() };
@@ -411,3 +416,80 @@ async fn request_bodies_are_streamed_not_held() {
     let more = format!("/api/v1/jobs/{}/files/sin-bands/more.exr", job.id);
     assert_eq!(send_zeros(&server.url, "PUT", &more, 40 * MIB, &auth).await, 204, "the budget was kept charged");
 }
+
+/// PUTs `upload` as the results of `job`; the answer's status, error code and message.
+async fn put_results(runner: &FakeRunner, job: &common::HeldJob, upload: &Value) -> (u16, String, String) {
+    let response = runner.job_request(Method::PUT, &job.id, &job.token, "results").body(upload.to_string()).send();
+    let (status, body) = json_of(response.await.unwrap()).await;
+    let text = |key: &str| body[key].as_str().unwrap_or_default().to_string();
+    (status, text("error"), text("message"))
+}
+
+on_both_databases!(
+    a_runner_scores_only_against_the_services_references_with_every_field_checked,
+    |db: Db| async move {
+        let server = spawn(db).await;
+        let ada = server.user("ada@example.org").await;
+        server.create_project(&ada, "box", "public").await;
+        let repo = technique_repository("box-filter-cpp");
+        assert!(push(repo.path(), &server.clone_url("box", &ada.token), &["FBKSD_RUN"]).0);
+        let runner = FakeRunner::register(&server, "r").await;
+        let job = runner.claim(5).await.expect("the benchmark job");
+        let honest = common::results_upload(1.0);
+        for run in honest["runs"].as_array().unwrap() {
+            let name = run["image"].as_str().unwrap();
+            assert_eq!(job.send(&runner, Method::PUT, &format!("files/{name}"), b"PNG".to_vec().into()).await, 204);
+        }
+
+        // Scored against images the service never stored: refused, so no set
+        // of a runner's own making can take a scene's board from the others.
+        let (status, code, message) = put_results(&runner, &job, &honest).await;
+        assert_eq!((status, code.as_str()), (400, "unknown_reference"), "{message}");
+        assert!(message.contains("scenes[0] (sin-bands): reference sha256:"), "{message}");
+        assert!(message.contains("is not one the service stores"), "{message}");
+
+        // Against a stored reference of another scene: refused too.
+        for scene in ["sin-bands", "defocus-checkerboard"] {
+            common::stored_reference(&runner, scene).await;
+        }
+        let mut swapped = honest.clone();
+        swapped["scenes"][1]["reference_hash"] = honest["scenes"][0]["reference_hash"].clone();
+        let (status, code, message) = put_results(&runner, &job, &swapped).await;
+        assert_eq!((status, code.as_str()), (400, "unknown_reference"), "{message}");
+        assert!(message.contains("scenes[1] (defocus-checkerboard)"), "{message}");
+        assert!(message.contains("was made for fake/sin-bands, not for this scene"), "{message}");
+
+        // Fields the server joins to its folders, shows or stores row by row.
+        let many_runs: Vec<Value> = (0..4097).map(|_| honest["runs"][0].clone()).collect();
+        let cases: [(&str, Value, &str); 8] = [
+            (
+                "/runs/0/log",
+                json!("/etc/passwd"),
+                "runs[0] (sin-bands at 4 spp): log \"/etc/passwd\" is not a relative path",
+            ),
+            ("/runs/1/log", json!("../../users.db"), "runs[1] (sin-bands at 16 spp): log \"../../users.db\""),
+            ("/runs/2/spp", json!(0), "runs[2] (defocus-checkerboard at 0 spp): spp must be 1 to"),
+            ("/scenes/0/name", json!("<b>x</b>"), "scenes[0]: name \"<b>x</b>\" must be 1 to 100 letters"),
+            ("/scenes/1/tags/0", json!("<script>"), "scenes[1] (defocus-checkerboard): tag \"<script>\" must be"),
+            ("/scenes/1/scene_hash", json!("h"), "scenes[1] (defocus-checkerboard): scene_hash \"h\" is not sha256:"),
+            ("/metrics/0/acronym", json!("M S E"), "metrics[0]: acronym \"M S E\" must be 1 to 32"),
+            ("/runs", json!(many_runs), "results: 4097 runs; at most 4096 are stored"),
+        ];
+        for (pointer, value, expected) in cases {
+            let mut bad = honest.clone();
+            *bad.pointer_mut(pointer).unwrap() = value;
+            let (status, code, message) = put_results(&runner, &job, &bad).await;
+            assert_eq!((status, code.as_str()), (400, "invalid_output"), "{pointer}: {message}");
+            assert!(message.contains(expected), "{pointer}: {message}");
+        }
+
+        // The honest upload is kept and stored.
+        assert_eq!(put_results(&runner, &job, &honest).await.0, 204);
+        let (status, done) = job.finish(&runner, json!({ "state": "succeeded" })).await;
+        assert_eq!(status, 200, "{done}");
+        let set = done["result_id"].as_str().unwrap();
+        let (status, body) =
+            json_of(ada.api(Method::GET, format!("{}/api/v1/results/{set}", server.url)).send().await.unwrap()).await;
+        assert_eq!((status, body["runs"].as_array().map(Vec::len)), (200, Some(4)), "{body}");
+    }
+);

@@ -62,3 +62,22 @@ on_both_databases!(health_readiness_and_metrics_follow_the_service, |db: Db| asy
     assert!(text.contains("the data directory takes no file"), "{text}");
     assert_eq!(get(&server, "/healthz").await.0, 200, "alive all the same");
 });
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn made_up_methods_share_one_metric_series() {
+    // Every label value is a series kept for the life of the process: one
+    // per made-up method would let anyone grow the server without bound.
+    let server = spawn(Db::Sqlite).await;
+    let client = reqwest::Client::new();
+    for i in 0..40 {
+        let method = reqwest::Method::from_bytes(format!("FLOOD{i}").as_bytes()).unwrap();
+        let status = client.request(method, format!("{}/", server.url)).send().await.unwrap().status();
+        assert!(status.is_client_error(), "{status}");
+    }
+    let metrics = get(&server, "/metrics").await.1;
+    assert!(!metrics.contains("FLOOD"), "a series per made-up method:\n{metrics}");
+    let made_up: Vec<&str> =
+        metrics.lines().filter(|l| l.contains("method=\"other\"") && l.contains("_count")).collect();
+    let answered: f64 = made_up.iter().filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok()).sum();
+    assert_eq!(answered, 40.0, "every made-up method counted under method=\"other\": {made_up:?}");
+}

@@ -227,6 +227,11 @@ pub struct ReferenceRequest {
     pub key: String,
     /// The scene, relative to the scene root.
     pub scene: String,
+    /// The scene's name as result sets give it
+    /// ([`crate::results::path_safe_name`] of its `scene.json` name): a
+    /// result set may name this reference for a scene of this name only.
+    #[serde(default)]
+    pub name: String,
 }
 
 /// Where a reference is on the service.
@@ -405,23 +410,136 @@ pub struct Upload {
     pub provenance: Provenance,
 }
 
+/// The most an upload may hold. Generous for any scene pool (ten scenes
+/// at five budgets and three seeds are 150 runs), and small enough that
+/// storing one stays quick: the runs go into the database in one
+/// transaction.
+pub mod limits {
+    /// Entries (scene, spp) in `runs`.
+    pub const RUNS: usize = 4096;
+    /// Repeats (seeds) of one entry.
+    pub const REPEATS: usize = 256;
+    /// Repeats over all entries.
+    pub const ALL_REPEATS: usize = 65_536;
+    /// Scenes.
+    pub const SCENES: usize = 256;
+    /// Metrics.
+    pub const METRICS: usize = 64;
+    /// Tags of one scene.
+    pub const TAGS: usize = 32;
+    /// Samples per pixel of one run.
+    pub const SPP: u64 = 1 << 20;
+}
+
+/// Whether `name` is a file name a job may upload or an upload may point
+/// at: relative, letters, digits, `.`, `-`, `_` and `/` between non-empty
+/// parts, no `..`, at most 200 bytes. Everything the server joins to one of
+/// its folders passes this first, so nothing names a file outside it.
+pub fn is_upload_file_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 200
+        && name.split('/').all(|p| !p.is_empty() && p != "." && p != "..")
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || "._-/".contains(c))
+}
+
+/// Whether `hash` is `sha256:` and 64 lower-case hex digits.
+pub fn is_sha256(hash: &str) -> bool {
+    hash.strip_prefix("sha256:")
+        .is_some_and(|hex| hex.len() == 64 && hex.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b)))
+}
+
+/// A name (scene, tag, metric): 1 to `max` letters, digits, `.`, `-`, `_`,
+/// not starting with `.`, as [`crate::results::path_safe_name`] makes them.
+fn is_plain_name(name: &str, max: usize) -> bool {
+    !name.is_empty()
+        && name.len() <= max
+        && !name.starts_with('.')
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || "._-".contains(c))
+}
+
+/// Text shown to people: at most `max` characters, no control characters
+/// but line breaks and tabs.
+fn is_plain_text(text: &str, max: usize) -> bool {
+    text.chars().count() <= max && !text.chars().any(|c| c.is_control() && !"\n\r\t".contains(c))
+}
+
 impl Upload {
-    /// Checks the upload's consistency against the files uploaded before it;
-    /// the message names the first problem.
+    /// Checks the upload's consistency against the files uploaded before it,
+    /// and every field the server stores or shows against its form and
+    /// [`limits`]; the message names the first problem and where it is.
     pub fn check(&self, files: &BTreeSet<String>) -> Result<(), String> {
         if self.runs.is_empty() {
             return Err("results: \"runs\" is empty".into());
         }
+        let too_many = |what: &str, n: usize, max: usize| {
+            (n > max).then(|| format!("results: {n} {what}; at most {max} are stored"))
+        };
+        let all_repeats: usize = self.runs.iter().map(|r| r.repeats.len()).sum();
+        let counts = [
+            too_many("runs", self.runs.len(), limits::RUNS),
+            too_many("repeats in all", all_repeats, limits::ALL_REPEATS),
+            too_many("scenes", self.scenes.len(), limits::SCENES),
+            too_many("metrics", self.metrics.len(), limits::METRICS),
+        ];
+        if let Some(problem) = counts.into_iter().flatten().next() {
+            return Err(problem);
+        }
+        for (i, metric) in self.metrics.iter().enumerate() {
+            let at = format!("results: metrics[{i}]");
+            if !is_plain_name(&metric.acronym, 32) || metric.acronym.contains('.') {
+                return Err(format!("{at}: acronym {:?} must be 1 to 32 letters, digits, - or _", metric.acronym));
+            }
+            if !is_plain_text(&metric.name, 200) || !is_plain_text(&metric.reference, 2000) {
+                return Err(format!(
+                    "{at} ({}): name or reference too long or with control characters",
+                    metric.acronym
+                ));
+            }
+        }
+        for (i, scene) in self.scenes.iter().enumerate() {
+            let at = format!("results: scenes[{i}]");
+            if !is_plain_name(&scene.name, 100) {
+                return Err(format!("{at}: name {:?} must be 1 to 100 letters, digits, . - or _", scene.name));
+            }
+            let at = format!("{at} ({})", scene.name);
+            if let Some(problem) = too_many("tags", scene.tags.len(), limits::TAGS) {
+                return Err(format!("{at}: {}", problem.trim_start_matches("results: ")));
+            }
+            if let Some(tag) = scene.tags.iter().find(|t| !is_plain_name(t, 40)) {
+                return Err(format!("{at}: tag {tag:?} must be 1 to 40 letters, digits, . - or _"));
+            }
+            for (field, hash) in [("scene_hash", &scene.scene_hash), ("reference_hash", &scene.reference_hash)] {
+                if !is_sha256(hash) {
+                    return Err(format!("{at}: {field} {hash:?} is not sha256:<64 lower-case hex digits>"));
+                }
+            }
+        }
         let scenes: BTreeSet<&str> = self.scenes.iter().map(|s| s.name.as_str()).collect();
         let metrics: BTreeSet<&str> = self.metrics.iter().map(|m| m.acronym.as_str()).collect();
+        let file = |at: &str, field: &str, name: &str| {
+            if is_upload_file_name(name) {
+                Ok(())
+            } else {
+                Err(format!("{at}: {field} {name:?} is not a relative path of letters, digits, . - _ and / (no ..)"))
+            }
+        };
         let mut seen = BTreeSet::new();
         for (i, run) in self.runs.iter().enumerate() {
             let at = format!("results: runs[{i}] ({} at {} spp)", run.scene, run.spp);
             if !scenes.contains(run.scene.as_str()) {
                 return Err(format!("{at}: scene {:?} is not in \"scenes\"", run.scene));
             }
+            if run.spp == 0 || run.spp > limits::SPP {
+                return Err(format!("{at}: spp must be 1 to {}", limits::SPP));
+            }
             if !seen.insert((run.scene.as_str(), run.spp)) {
                 return Err(format!("{at}: appears twice"));
+            }
+            if let Some(problem) = too_many("repeats", run.repeats.len(), limits::REPEATS) {
+                return Err(format!("{at}: {}", problem.trim_start_matches("results: ")));
+            }
+            if !run.log.is_empty() {
+                file(&at, "log", &run.log)?;
             }
             for (metric, value) in &run.metrics {
                 if !metrics.contains(metric.as_str()) {
@@ -435,6 +553,7 @@ impl Upload {
                 return Err(format!("{at}: times must be finite"));
             }
             if let Some(image) = &run.image {
+                file(&at, "image", image)?;
                 if !files.contains(image) {
                     return Err(format!("{at}: image {image:?} was not uploaded"));
                 }
@@ -444,6 +563,12 @@ impl Upload {
                 let at = format!("{at}: repeats[{k}]");
                 if !seeds.insert(repeat.seed) {
                     return Err(format!("{at}: seed {} appears twice", repeat.seed));
+                }
+                if !repeat.log.is_empty() {
+                    file(&at, "log", &repeat.log)?;
+                }
+                if let Some(image) = &repeat.image {
+                    file(&at, "image", image)?;
                 }
                 for (metric, value) in &repeat.metrics {
                     if !metrics.contains(metric.as_str()) {

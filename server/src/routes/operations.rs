@@ -37,7 +37,7 @@ pub async fn metrics(State(state): State<AppState>) -> Response {
 /// its route's pattern.
 pub async fn track(State(state): State<AppState>, request: Request, next: Next) -> Response {
     let started = Instant::now();
-    let method = request.method().to_string();
+    let method = crate::telemetry::method_label(request.method()).to_string();
     let route = request.extensions().get::<MatchedPath>().map_or("unmatched".into(), |p| p.as_str().to_string());
     let response = next.run(request).await;
     let labels = crate::telemetry::HttpLabels { method, route, status: response.status().as_u16() };

@@ -330,6 +330,7 @@ pub async fn put_results(
             .map_err(|e| ApiError::bad_request("invalid_output", format!("results: {e}")))?;
         let staging = crate::results::staging_dir(&state.config.data_dir, &job.job_id);
         upload.check(&uploaded_files(&staging)).map_err(|e| ApiError::bad_request("invalid_output", e))?;
+        crate::references::check_upload(&state.pool, &upload).await?;
         crate::jobs::stage_results(&state.pool, &job.job_id, &String::from_utf8_lossy(&body)).await?;
         Ok::<(), ApiError>(())
     }

@@ -391,9 +391,56 @@ impl HeldJob {
     }
 }
 
+/// The reference image a fake renderer makes of `scene` (bytes no one
+/// reads as an EXR: the service only hashes and keeps them) and its hash.
+pub fn fake_reference(scene: &str) -> (Vec<u8>, String) {
+    let bytes = format!("the reference of {scene}").into_bytes();
+    let hash = format!("sha256:{:x}", <sha2::Sha256 as sha2::Digest>::digest(&bytes));
+    (bytes, hash)
+}
+
+/// A `sha256:<hex>` that stands for the files of `scene`.
+pub fn fake_scene_hash(scene: &str) -> String {
+    format!("sha256:{:x}", <sha2::Sha256 as sha2::Digest>::digest(format!("the files of {scene}")))
+}
+
+/// The key of [`fake_reference`] of `scene` (the recipe its note names).
+pub fn fake_reference_key(scene: &str) -> String {
+    fbksd_exchange::scenes::reference_key(FAKE_RENDERER, FAKE_SPP, &fake_scene_hash(scene))
+}
+
+const FAKE_RENDERER: &str = "fake-renderer 1";
+const FAKE_SPP: u64 = 16;
+
+/// Has the service store [`fake_reference`] of `scene` as a runner would
+/// (asks for it, then makes it as the reference job it queues, unless it
+/// is stored already), so result sets may be scored against it; its hash.
+pub async fn stored_reference(runner: &FakeRunner, scene: &str) -> String {
+    let (bytes, hash) = fake_reference(scene);
+    let (generator, spp, digest) = (FAKE_RENDERER, FAKE_SPP, fake_scene_hash(scene));
+    let key = fake_reference_key(scene);
+    let ask = serde_json::json!({ "key": key, "scene": format!("fake/{scene}"), "name": scene });
+    let (status, body) = runner.post("runners/references", ask).await;
+    assert_eq!(status, 200, "{body}");
+    if body["state"] == "ready" {
+        assert_eq!(body["reference_hash"], hash.as_str(), "{body}");
+        return hash;
+    }
+    let claim = serde_json::json!({ "wait_seconds": 5, "reference_keys": [key], "references_only": true });
+    let job = runner.claim_with(claim).await.expect("the reference job just queued");
+    let note = serde_json::json!({ "generator": generator, "samples_per_pixel": spp, "scene_digest": digest });
+    for (name, file) in [("reference.exr", bytes), ("reference.json", note.to_string().into_bytes())] {
+        assert_eq!(job.send(runner, reqwest::Method::PUT, &format!("files/{name}"), file.into()).await, 204, "{name}");
+    }
+    let (status, body) = job.finish(runner, serde_json::json!({ "state": "succeeded" })).await;
+    assert_eq!(status, 200, "{body}");
+    hash
+}
+
 /// Results a runner could upload: two scenes at 4 and 16 spp, metric
 /// values scaled by `quality` (smaller is better), images named like the
-/// SDK's results directory.
+/// SDK's results directory, scored against the scenes' [`fake_reference`]s
+/// (which [`upload_results`] has the service store first).
 pub fn results_upload(quality: f64) -> serde_json::Value {
     let mut runs = Vec::new();
     for (scene, base) in [("sin-bands", 0.01), ("defocus-checkerboard", 0.1)] {
@@ -406,16 +453,23 @@ pub fn results_upload(quality: f64) -> serde_json::Value {
             }));
         }
     }
+    let scenes: Vec<serde_json::Value> = [
+        ("sin-bands", vec!["procedural"]),
+        ("defocus-checkerboard", vec!["procedural", "dof"]),
+    ]
+    .into_iter()
+    .map(|(name, tags)| {
+        let (scene_hash, reference_hash) = (fake_scene_hash(name), fake_reference(name).1);
+        serde_json::json!({ "name": name, "tags": tags, "scene_hash": scene_hash, "reference_hash": reference_hash })
+    })
+    .collect();
     serde_json::json!({
         "runs": runs,
         "metrics": [
             { "acronym": "MSE", "name": "Mean squared error", "reference": "", "lower_is_better": true, "has_error_map": true },
             { "acronym": "SSIM", "name": "Structural similarity", "reference": "", "lower_is_better": false, "has_error_map": true }
         ],
-        "scenes": [
-            { "name": "sin-bands", "tags": ["procedural"], "scene_hash": "sha256:aa", "reference_hash": "sha256:bb" },
-            { "name": "defocus-checkerboard", "tags": ["procedural", "dof"], "scene_hash": "sha256:cc", "reference_hash": "sha256:dd" }
-        ],
+        "scenes": scenes,
         "provenance": { "image_digest": "sha256:0123", "runner": "fake", "machine": { "cpu_model": "test CPU", "cores": 2 } }
     })
 }
@@ -429,6 +483,9 @@ pub async fn upload_results(runner: &FakeRunner, job: &HeldJob, quality: f64) {
 pub async fn upload_results_on(runner: &FakeRunner, job: &HeldJob, quality: f64, machine: serde_json::Value) {
     let mut upload = results_upload(quality);
     upload["provenance"]["machine"] = machine;
+    for scene in upload["scenes"].as_array().unwrap() {
+        stored_reference(runner, scene["name"].as_str().unwrap()).await;
+    }
     for run in upload["runs"].as_array().unwrap() {
         let name = run["image"].as_str().unwrap();
         let status =
@@ -439,11 +496,10 @@ pub async fn upload_results_on(runner: &FakeRunner, job: &HeldJob, quality: f64,
     assert_eq!(status, 204);
 }
 
-/// A scene of [`Pictured`] results.
+/// A scene of [`Pictured`] results (scored against its [`stored_reference`]).
 pub struct PicturedScene<'a> {
     pub name: &'a str,
     pub tags: &'a [&'a str],
-    pub reference_hash: &'a str,
 }
 
 /// The albedo buffer [`upload_pictured`] sends with scene `scene`'s
@@ -504,9 +560,12 @@ pub async fn upload_pictured(runner: &FakeRunner, job: &HeldJob, p: &Pictured<'_
             }));
         }
     }
+    let mut hashes = Vec::new();
+    for scene in p.scenes {
+        hashes.push(stored_reference(runner, scene.name).await);
+    }
     let mut sent = 0;
-    for (s, scene) in p.scenes.iter().enumerate() {
-        let hash = scene.reference_hash;
+    for (s, hash) in hashes.iter().enumerate() {
         let held =
             runner.job_request(reqwest::Method::GET, &job.id, &job.token, &format!("references/{hash}")).send().await;
         match held.unwrap().status().as_u16() {
@@ -520,8 +579,7 @@ pub async fn upload_pictured(runner: &FakeRunner, job: &HeldJob, p: &Pictured<'_
         }
     }
     // The albedo buffer made with each reference, also once per reference.
-    for (s, scene) in p.scenes.iter().enumerate() {
-        let hash = scene.reference_hash;
+    for (s, hash) in hashes.iter().enumerate() {
         let path = format!("references/{hash}?buffer=albedo");
         let held = runner.job_request(reqwest::Method::GET, &job.id, &job.token, &path).send().await;
         match held.unwrap().status().as_u16() {
@@ -539,8 +597,8 @@ pub async fn upload_pictured(runner: &FakeRunner, job: &HeldJob, p: &Pictured<'_
             { "acronym": "MSE", "name": "Mean squared error", "reference": "", "lower_is_better": true, "has_error_map": true },
             { "acronym": "PSNR", "name": "Peak signal-to-noise ratio", "reference": "", "lower_is_better": false, "has_error_map": false }
         ],
-        "scenes": p.scenes.iter().map(|s| serde_json::json!({
-            "name": s.name, "tags": s.tags, "scene_hash": "sha256:aa", "reference_hash": s.reference_hash
+        "scenes": p.scenes.iter().zip(&hashes).map(|(s, hash)| serde_json::json!({
+            "name": s.name, "tags": s.tags, "scene_hash": fake_scene_hash(s.name), "reference_hash": hash
         })).collect::<Vec<_>>(),
         "provenance": { "runner": "fake" }
     });
