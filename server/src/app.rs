@@ -108,13 +108,17 @@ impl Application {
         keep_private(&config.data_dir)
             .map_err(|e| anyhow::anyhow!("data directory {}: {e}", config.data_dir.display()))?;
 
-        // Leases expire even when no runner polls.
+        // Leases expire, and attempts run out of time, even when no runner polls.
         let sweeper = pool.clone();
+        let max_job_ms = (config.max_job_seconds as i64).saturating_mul(1000);
         tokio::spawn(async move {
             loop {
                 tokio::time::sleep(std::time::Duration::from_secs(1)).await;
                 if let Err(e) = crate::jobs::expire_leases(&sweeper).await {
                     tracing::warn!("expiring leases: {e}");
+                }
+                if let Err(e) = crate::jobs::stop_overdue(&sweeper, max_job_ms).await {
+                    tracing::warn!("stopping jobs past max_job_seconds: {e}");
                 }
             }
         });

@@ -51,6 +51,10 @@ pub struct Config {
     /// A job's lease: a runner that does not heartbeat for this long loses
     /// the job, which is queued again.
     pub lease_seconds: u64,
+    /// Longest one attempt of a job may run, in seconds, however its
+    /// runner heart-beats: past it the job fails as a timeout and its runner
+    /// is told to stop (a runner cannot hold a job for ever).
+    pub max_job_seconds: u64,
     /// How many times a job is handed to a runner before it fails as an
     /// infrastructure error.
     pub max_attempts: u64,
@@ -153,6 +157,7 @@ impl Default for Config {
             runner_registration_token: Secret::default(),
             max_push_bytes: 64 << 20,
             lease_seconds: 60,
+            max_job_seconds: 24 * 3600,
             max_attempts: 3,
             long_poll_seconds: 25,
             max_log_bytes: 4 << 20,

@@ -227,7 +227,7 @@ async fn claim_picked(
     let lock = if postgres { " FOR UPDATE OF j SKIP LOCKED" } else { "" };
     let sql = format!(
         "UPDATE jobs SET state = 'running', runner_id = $1, token_hash = $2, lease_expires_at = $3, \
-         attempts = attempts + 1, started_at = COALESCE(started_at, $4) \
+         attempts = attempts + 1, started_at = COALESCE(started_at, $4), attempt_started_at = $4 \
          WHERE state = 'queued' AND id = ({pick}{lock}) RETURNING id"
     );
     let mut query =
@@ -384,6 +384,42 @@ pub async fn expire_leases(pool: &AnyPool) -> Result<usize, sqlx::Error> {
         }
     }
     Ok(touched)
+}
+
+/// Fails every running job whose attempt started more than `max_ms` ago,
+/// as a timeout, however its runner heart-beats: its token stops working,
+/// so the runner is told to stop at its next report. Returns how many.
+pub async fn stop_overdue(pool: &AnyPool, max_ms: i64) -> Result<usize, sqlx::Error> {
+    let now = now_ms();
+    let rows = sqlx::query("SELECT id, attempts FROM jobs WHERE state = 'running' AND attempt_started_at < $1")
+        .bind(now - max_ms)
+        .fetch_all(pool)
+        .await?;
+    let limit = match max_ms / 1000 {
+        s if s >= 3600 && s % 3600 == 0 => format!("{} h", s / 3600),
+        s => format!("{s} s"),
+    };
+    let message = format!("the job ran past the service's limit of {limit} per attempt (max_job_seconds)");
+    let mut stopped = 0;
+    for row in rows {
+        let (id, attempts): (String, i64) = (row.try_get("id")?, row.try_get("attempts")?);
+        let done = sqlx::query(
+            "UPDATE jobs SET state = 'failed', failure_reason = 'timeout', token_hash = NULL, \
+             lease_expires_at = NULL, finished_at = $1, message = $2 \
+             WHERE id = $3 AND state = 'running' AND attempt_started_at < $4",
+        )
+        .bind(now)
+        .bind(&message)
+        .bind(&id)
+        .bind(now - max_ms)
+        .execute(pool)
+        .await?;
+        if done.rows_affected() > 0 {
+            append_log(pool, &id, attempts, &format!("[fbksd] {message}: stopped\n"), i64::MAX).await?;
+            stopped += 1;
+        }
+    }
+    Ok(stopped)
 }
 
 /// Cancels a queued or running job; a job cancelled before it started does

@@ -148,6 +148,32 @@ on_both_databases!(a_lost_lease_queues_the_job_again_for_another_runner, |db: Db
     assert!(log.contains("lease expired") && !log.contains("late"), "{log}");
 });
 
+on_both_databases!(an_attempt_past_max_job_seconds_fails_however_its_runner_beats, |db: Db| async move {
+    let server = spawn_with(db, |c| c.max_job_seconds = 2).await;
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "slow", "private").await;
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url("slow", &ada.token), &[]).0);
+    let runner = FakeRunner::register(&server, "r").await;
+    let job = runner.claim(5).await.unwrap();
+    // The runner keeps its lease alive, as a runner holding a job for ever would.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let status = job.send(&runner, Method::POST, "heartbeat", "".into()).await;
+        if status == 410 {
+            break;
+        }
+        assert_eq!(status, 200);
+        assert!(std::time::Instant::now() < deadline, "the attempt was never stopped");
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    let jobs = project_jobs(&server, &ada, "slow").await;
+    assert_eq!((jobs[0]["state"].as_str(), jobs[0]["failure_reason"].as_str()), (Some("failed"), Some("timeout")));
+    let message = jobs[0]["message"].as_str().unwrap();
+    assert!(message.contains("past the service's limit of 2 s per attempt (max_job_seconds)"), "{message}");
+    assert_eq!(job.finish(&runner, json!({ "state": "succeeded" })).await.0, 410, "its token is void");
+});
+
 on_both_databases!(runners_racing_for_jobs_get_each_job_once, |db: Db| async move {
     let server = spawn(db).await;
     let ada = server.user("ada@example.org").await;
