@@ -1,6 +1,7 @@
 //! `fbksd-server backup DIR` and `fbksd-server restore DIR`: the database
 //! and the files the service cannot make again (git repositories, result
-//! files, the shared reference pixels), taken while the service runs.
+//! files, the shared reference pixels, the scenes' references that runners
+//! download), taken while the service runs.
 //!
 //! The database is copied first, consistently: SQLite by `VACUUM INTO`
 //! (an online, transactional copy), PostgreSQL by `pg_dump`. The files are
@@ -10,13 +11,18 @@
 //! jobs that a restored service runs again, and the hooks are written at
 //! start. A restore goes into an empty data directory (and, for
 //! PostgreSQL, an empty database) only: it never mixes two services.
+//!
+//! A backup holds password hashes and private repositories, so its folder
+//! (like the data directory) is its owner's alone (`0700`), and the
+//! database's password reaches `pg_dump` and `pg_restore` through their
+//! environment, never their command line, which other users can read.
 
 use crate::config::Config;
 use anyhow::{bail, Context};
 use std::path::Path;
 
 /// The folders of the data directory a backup holds.
-const KEPT: [&str; 3] = ["git", "results", "references"];
+const KEPT: [&str; 4] = ["git", "results", "references", "scene-references"];
 
 /// What a backup directory says about itself.
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -48,7 +54,8 @@ pub async fn backup(config: &Config, dir: &Path) -> anyhow::Result<()> {
     ensure_empty(dir).with_context(|| format!("backup directory {}", dir.display()))?;
     let url = config.database_url();
     let database = if is_postgres(config) {
-        run("pg_dump", &["--format=custom", "--no-owner", "--file", &dir.join(PG_FILE).to_string_lossy(), &url])?;
+        let file = dir.join(PG_FILE).to_string_lossy().into_owned();
+        run(postgres_tool("pg_dump", &url, &["--format=custom", "--no-owner", "--file", &file])?)?;
         "postgres"
     } else {
         let pool = crate::db::connect(&url).await.context("the database")?;
@@ -93,10 +100,8 @@ pub async fn restore(config: &Config, dir: &Path) -> anyhow::Result<()> {
             bail!("the configured database already holds {users} users: restore into an empty one");
         }
         pool.close().await;
-        run(
-            "pg_restore",
-            &["--clean", "--if-exists", "--no-owner", "--dbname", &url, &dir.join(PG_FILE).to_string_lossy()],
-        )?;
+        let file = dir.join(PG_FILE).to_string_lossy().into_owned();
+        run(postgres_tool("pg_restore", &url, &["--clean", "--if-exists", "--no-owner", &file])?)?;
     } else {
         std::fs::copy(dir.join(SQLITE_FILE), config.data_dir.join(SQLITE_FILE)).context("copying the database")?;
     }
@@ -109,12 +114,16 @@ pub async fn restore(config: &Config, dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Creates `dir`, or checks that it holds nothing.
+/// Creates `dir`, or checks that it holds nothing, and makes it its
+/// owner's alone: nothing copied into it is readable by other users,
+/// whatever its own mode.
 fn ensure_empty(dir: &Path) -> anyhow::Result<()> {
+    use std::os::unix::fs::PermissionsExt;
     std::fs::create_dir_all(dir)?;
     if std::fs::read_dir(dir)?.next().is_some() {
         bail!("it is not empty");
     }
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))?;
     Ok(())
 }
 
@@ -136,14 +145,64 @@ fn copy_tree(from: &Path, to: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The PostgreSQL client `program` with `args`, connected to the database
+/// at `url`: the URL without its password on the command line (which every
+/// local user can read), the password in `PGPASSWORD`.
+fn postgres_tool(program: &str, url: &str, args: &[&str]) -> anyhow::Result<std::process::Command> {
+    let mut url = reqwest::Url::parse(url).context("database_url")?;
+    let password = url.password().map(percent_decoded);
+    url.set_password(None).map_err(|()| anyhow::anyhow!("database_url: {url} takes no password"))?;
+    let mut command = std::process::Command::new(program);
+    command.arg("--dbname").arg(url.as_str()).args(args);
+    if let Some(password) = password {
+        command.env("PGPASSWORD", password);
+    }
+    Ok(command)
+}
+
+/// `text` with its `%XX` escapes decoded (a URL's password is escaped).
+fn percent_decoded(text: &str) -> String {
+    let bytes = text.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = bytes.get(i + 1..i + 3).and_then(|h| u8::from_str_radix(std::str::from_utf8(h).ok()?, 16).ok());
+        match (bytes[i], hex) {
+            (b'%', Some(byte)) => {
+                out.push(byte);
+                i += 3;
+            }
+            (byte, _) => {
+                out.push(byte);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
 /// Runs a PostgreSQL tool; its error output names what failed.
-fn run(program: &str, args: &[&str]) -> anyhow::Result<()> {
-    let output = std::process::Command::new(program)
-        .args(args)
-        .output()
-        .with_context(|| format!("cannot run {program} (PostgreSQL's client tools)"))?;
+fn run(mut command: std::process::Command) -> anyhow::Result<()> {
+    let program = command.get_program().to_string_lossy().into_owned();
+    let output = command.output().with_context(|| format!("cannot run {program} (PostgreSQL's client tools)"))?;
     if !output.status.success() {
         bail!("{program} failed: {}", String::from_utf8_lossy(&output.stderr).trim());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_database_password_stays_off_the_command_line() {
+        let url = "postgres://fbksd:s%40cret%2Fpass@db.internal:5432/fbksd?sslmode=require";
+        let command = postgres_tool("pg_dump", url, &["--format=custom"]).unwrap();
+        let args: Vec<String> = command.get_args().map(|a| a.to_string_lossy().into_owned()).collect();
+        assert!(args.iter().all(|a| !a.contains("cret")), "{args:?}");
+        assert_eq!(args[..2], ["--dbname", "postgres://fbksd@db.internal:5432/fbksd?sslmode=require"]);
+        let env: Vec<_> = command.get_envs().collect();
+        assert_eq!(env, [(std::ffi::OsStr::new("PGPASSWORD"), Some(std::ffi::OsStr::new("s@cret/pass")))]);
+    }
 }

@@ -1,7 +1,8 @@
 //! `fbksd-server backup DIR`, taken while the service runs, restored with
 //! `fbksd-server restore DIR` into an empty data directory (and database):
-//! the restored service shows the same board, projects, private results
-//! and repositories, to the same users with the same tokens.
+//! the restored service shows the same board, projects, private results,
+//! repositories and scene references, to the same users and runners with
+//! the same tokens; the backup is its owner's alone.
 
 mod common;
 
@@ -50,19 +51,22 @@ on_both_databases!(a_backup_restored_into_an_empty_directory_serves_the_same_ser
     assert_eq!(before["standings"].as_array().unwrap().len(), 1, "{before}");
 
     // Taken while the service runs; restored where nothing is.
-    let backup = tempfile::tempdir().unwrap();
+    let backups = tempfile::tempdir().unwrap();
+    let backup = backups.path().join("nightly");
     let data = &server.config().data_dir;
-    server_command(data, &server.config().database_url.0, &["backup", &backup.path().to_string_lossy()]);
+    server_command(data, &server.config().database_url.0, &["backup", &backup.to_string_lossy()]);
+    let mode = |p: &std::path::Path| std::os::unix::fs::PermissionsExt::mode(&p.metadata().unwrap().permissions());
+    assert_eq!(mode(&backup) & 0o777, 0o700, "password hashes and private repositories are the owner's alone");
     let restored = tempfile::tempdir().unwrap();
     let database = match db {
         Db::Sqlite => String::new(),
         Db::Postgres => common::fresh_postgres().await,
     };
-    server_command(restored.path(), &database, &["restore", &backup.path().to_string_lossy()]);
+    server_command(restored.path(), &database, &["restore", &backup.to_string_lossy()]);
     // A second restore into the same place is refused: it would mix two services.
     let mut again = Command::new(env!("CARGO_BIN_EXE_fbksd-server"));
     again.env("FBKSD_SERVER_DATA_DIR", restored.path()).env("FBKSD_SERVER_DATABASE_URL", &database);
-    let again = again.args(["restore", &backup.path().to_string_lossy()]).output().unwrap();
+    let again = again.args(["restore", &backup.to_string_lossy()]).output().unwrap();
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("restore into an empty one"));
 
@@ -90,4 +94,14 @@ on_both_databases!(a_backup_restored_into_an_empty_directory_serves_the_same_ser
     let cloned = common::git(clone.path(), &["clone", "-q", &copy.clone_url("private", &ada.token), "src"]);
     assert!(cloned.status.success(), "{}", String::from_utf8_lossy(&cloned.stderr));
     assert!(clone.path().join("src/CMakeLists.txt").is_file());
+    // The scenes' references, which runners download before any job.
+    let key = common::fake_reference_key("sin-bands");
+    let reference = reqwest::Client::new()
+        .get(format!("{url}/api/v1/runners/references/{key}/files/reference.exr"))
+        .bearer_auth(&runner.token)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(reference.status(), 200, "a restored service hands out its stored references");
+    assert_eq!(reference.bytes().await.unwrap().to_vec(), common::fake_reference("sin-bands").0);
 });
