@@ -2,14 +2,16 @@
 //! service.
 //!
 //! At start ([`prepare`]) the runner asks each scene's renderer for the
-//! scene's reference key (`fbksd-<renderer> reference --key`). A reference
-//! already beside the scene with that key is kept. Each one missing is
-//! asked of the server: a stored one is downloaded, checked against its
-//! SHA-256 and its note's key, and written beside the scene; one not
-//! stored yet is made by whichever runner claims its `reference` job
-//! first — this runner too, which meanwhile claims nothing else. So a new
-//! runner renders no reference the service already has, and every runner
-//! scores against the same image.
+//! scene's reference key (`fbksd-<renderer> reference --key`), and the
+//! server for each key (with the scene's name). A reference beside the
+//! scene with that key is kept when it is the one the server stores; else
+//! the stored one is downloaded, checked against its SHA-256 and its
+//! note's key, and written beside the scene; one not stored yet is made by
+//! whichever runner claims its `reference` job first — this runner too,
+//! which meanwhile claims nothing else (and only uploads a current one). So
+//! a new runner renders no reference the service already has, and every
+//! runner scores against the same image, the only one the server accepts
+//! results against.
 //!
 //! Reference jobs ([`make_and_upload`]) run the renderer's `reference`
 //! command on the host (no technique runs, so no sandbox) and upload the
@@ -309,16 +311,21 @@ async fn install(
     write_whole(&scene.meta.reference_file(), &image)?;
     for buffer in FEATURE_BUFFERS {
         let name = reference_buffer_file(buffer);
+        let file = scene.meta.feature_buffer_file(buffer);
         if status.files.contains(&name) {
             let bytes = api.reference_file(runner_token, &scene.key, &name).await?;
-            write_whole(&scene.meta.feature_buffer_file(buffer), &bytes)?;
+            write_whole(&file, &bytes)?;
+        } else {
+            // Made with a reference this one replaces: the renderer makes it again.
+            let _ = std::fs::remove_file(&file);
         }
     }
     write_whole(&scene.meta.reference_note_file(), &note)
 }
 
 fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let tmp = path.with_extension("download");
+    // Its own name: two runners may share a scene folder.
+    let tmp = path.with_extension(format!("download-{}", std::process::id()));
     std::fs::write(&tmp, bytes).map_err(|e| anyhow::anyhow!("{}: {e}", tmp.display()))?;
     std::fs::rename(&tmp, path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }

@@ -110,14 +110,21 @@ impl Application {
 
         // Leases expire, and attempts run out of time, even when no runner polls.
         let sweeper = pool.clone();
-        let max_job_ms = (config.max_job_seconds as i64).saturating_mul(1000);
+        // 0: no limit.
+        let max_job_ms = match config.max_job_seconds {
+            0 => None,
+            s => Some(i64::try_from(s).unwrap_or(i64::MAX / 1000).saturating_mul(1000)),
+        };
         tokio::spawn(async move {
             loop {
                 tokio::time::sleep(std::time::Duration::from_secs(1)).await;
                 if let Err(e) = crate::jobs::expire_leases(&sweeper).await {
                     tracing::warn!("expiring leases: {e}");
                 }
-                if let Err(e) = crate::jobs::stop_overdue(&sweeper, max_job_ms).await {
+                if let Some(Err(e)) = match max_job_ms {
+                    Some(max) => Some(crate::jobs::stop_overdue(&sweeper, max).await),
+                    None => None,
+                } {
                     tracing::warn!("stopping jobs past max_job_seconds: {e}");
                 }
             }

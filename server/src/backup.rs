@@ -149,14 +149,18 @@ fn copy_tree(from: &Path, to: &Path) -> anyhow::Result<()> {
 /// at `url`: the URL without its password on the command line (which every
 /// local user can read), the password in `PGPASSWORD`.
 fn postgres_tool(program: &str, url: &str, args: &[&str]) -> anyhow::Result<std::process::Command> {
-    let mut url = reqwest::Url::parse(url).context("database_url")?;
-    let password = url.password().map(percent_decoded);
-    url.set_password(None).map_err(|()| anyhow::anyhow!("database_url: {url} takes no password"))?;
     let mut command = std::process::Command::new(program);
-    command.arg("--dbname").arg(url.as_str()).args(args);
-    if let Some(password) = password {
-        command.env("PGPASSWORD", password);
-    }
+    let parsed = reqwest::Url::parse(url).ok().filter(|u| u.password().is_some());
+    match parsed {
+        Some(mut url) => {
+            command.env("PGPASSWORD", percent_decoded(url.password().unwrap_or_default()));
+            url.set_password(None).map_err(|()| anyhow::anyhow!("database_url: {url} takes no password"))?;
+            command.arg("--dbname").arg(url.as_str())
+        }
+        // No password in it (a socket, or a password file): as it is.
+        None => command.arg("--dbname").arg(url),
+    };
+    command.args(args);
     Ok(command)
 }
 
@@ -204,5 +208,10 @@ mod tests {
         assert_eq!(args[..2], ["--dbname", "postgres://fbksd@db.internal:5432/fbksd?sslmode=require"]);
         let env: Vec<_> = command.get_envs().collect();
         assert_eq!(env, [(std::ffi::OsStr::new("PGPASSWORD"), Some(std::ffi::OsStr::new("s@cret/pass")))]);
+        // A URL without a password (a local socket) is passed as it is.
+        let socket = "postgres:///fbksd?host=/run/postgresql";
+        let command = postgres_tool("pg_dump", socket, &[]).unwrap();
+        assert_eq!(command.get_args().collect::<Vec<_>>(), ["--dbname", socket]);
+        assert_eq!(command.get_envs().count(), 0);
     }
 }

@@ -53,7 +53,7 @@ pub struct Config {
     pub lease_seconds: u64,
     /// Longest one attempt of a job may run, in seconds, however its
     /// runner heart-beats: past it the job fails as a timeout and its runner
-    /// is told to stop (a runner cannot hold a job for ever).
+    /// is told to stop (a runner cannot hold a job for ever); 0: no limit.
     pub max_job_seconds: u64,
     /// How many times a job is handed to a runner before it fails as an
     /// infrastructure error.

@@ -388,7 +388,10 @@ pub async fn expire_leases(pool: &AnyPool) -> Result<usize, sqlx::Error> {
 
 /// Fails every running job whose attempt started more than `max_ms` ago,
 /// as a timeout, however its runner heart-beats: its token stops working,
-/// so the runner is told to stop at its next report. Returns how many.
+/// so the runner is told to stop at its next report. The runner bounds
+/// every build and run itself, so an attempt this long is the runner's
+/// doing more likely than the technique's: it does not count against the
+/// owner's quota. Returns how many.
 pub async fn stop_overdue(pool: &AnyPool, max_ms: i64) -> Result<usize, sqlx::Error> {
     let now = now_ms();
     let rows = sqlx::query("SELECT id, attempts FROM jobs WHERE state = 'running' AND attempt_started_at < $1")
@@ -399,13 +402,16 @@ pub async fn stop_overdue(pool: &AnyPool, max_ms: i64) -> Result<usize, sqlx::Er
         s if s >= 3600 && s % 3600 == 0 => format!("{} h", s / 3600),
         s => format!("{s} s"),
     };
-    let message = format!("the job ran past the service's limit of {limit} per attempt (max_job_seconds)");
+    let message = format!(
+        "the job ran past the service's limit of {limit} per attempt (max_job_seconds); \
+         it does not count against your quota"
+    );
     let mut stopped = 0;
     for row in rows {
         let (id, attempts): (String, i64) = (row.try_get("id")?, row.try_get("attempts")?);
         let done = sqlx::query(
             "UPDATE jobs SET state = 'failed', failure_reason = 'timeout', token_hash = NULL, \
-             lease_expires_at = NULL, finished_at = $1, message = $2 \
+             lease_expires_at = NULL, counts_for_quota = 0, finished_at = $1, message = $2 \
              WHERE id = $3 AND state = 'running' AND attempt_started_at < $4",
         )
         .bind(now)

@@ -104,53 +104,65 @@ pub async fn request(state: &AppState, request: &ReferenceRequest) -> Result<Ref
         ));
     }
     let name = request.name.as_str();
-    if !name.is_empty() && (name.len() > 100 || fbksd_exchange::results::path_safe_name(name) != name) {
+    if name.is_empty() || name.len() > 100 || fbksd_exchange::results::path_safe_name(name) != name {
         return Err(ServiceError::invalid(
             "invalid_scene",
-            format!("scene name {name:?} must be 1 to 100 letters, digits, . - or _, as result sets name scenes"),
+            format!(
+                "scene name {name:?} must be 1 to 100 letters, digits, . - or _, as result sets name scenes \
+                 (a runner that sends none is older than this server: upgrade it)"
+            ),
         ));
     }
+    name_scene(&state.pool, &request.key, name).await?;
     // Twice at most: a race lost to another ask finds that ask's job.
     for _ in 0..2 {
         let failed_job = match status(&state.pool, data, &request.key).await? {
-            Some(s) if s.state != ReferenceState::Failed => {
-                name_scene(&state.pool, &request.key, name).await?;
-                return Ok(s);
-            }
+            Some(s) if s.state != ReferenceState::Failed => return Ok(s),
             Some(s) => Some(s.job_id),
             None => None,
         };
         queue_job(state, &request.key, scene, failed_job.as_deref()).await?;
-        name_scene(&state.pool, &request.key, name).await?;
     }
     status(&state.pool, data, &request.key).await?.ok_or_else(|| ServiceError::internal("reference vanished"))
 }
 
-/// Records the name result sets give the scene of reference `key`, the
-/// first time a runner says it.
+/// Names per reference key at most: two scenes may render the same files,
+/// and no runner can grow the table without bound.
+const NAMES_PER_KEY: i64 = 16;
+
+/// Records that result sets may name the reference of `key` for scenes
+/// called `name`.
 async fn name_scene(pool: &AnyPool, key: &str, name: &str) -> Result<(), sqlx::Error> {
-    if !name.is_empty() {
-        sqlx::query("UPDATE scene_references SET scene_name = $1 WHERE key = $2 AND scene_name IS NULL")
-            .bind(name)
-            .bind(key)
-            .execute(pool)
-            .await?;
-    }
+    sqlx::query(
+        "INSERT INTO scene_reference_names (key, name) \
+         SELECT $1, $2 WHERE (SELECT COUNT(*) FROM scene_reference_names WHERE key = $1) < $3 \
+         ON CONFLICT (key, name) DO NOTHING",
+    )
+    .bind(key)
+    .bind(name)
+    .bind(NAMES_PER_KEY)
+    .execute(pool)
+    .await?;
     Ok(())
 }
 
 /// Checks that every scene of a runner's upload names a reference the
-/// service stores, made for a scene of that name: a result set is scored
-/// against the service's references only, so a runner cannot put a set on
-/// the board against an image of its own (the leaderboard ranks each scene
-/// against the newest set's reference) or against another scene's.
+/// service stores, asked for under that scene's name: a result set is
+/// scored against the references every runner downloads, so an upload
+/// cannot name an image no reference job made, or another scene's (the
+/// leaderboard ranks each scene against the newest set's reference, so
+/// either would take the scene's board from the other sets).
 pub async fn check_upload(pool: &AnyPool, upload: &fbksd_exchange::runner_api::Upload) -> Result<(), ServiceError> {
     for (i, scene) in upload.scenes.iter().enumerate() {
         let at = format!("results: scenes[{i}] ({})", scene.name);
-        let rows = sqlx::query("SELECT scene, scene_name FROM scene_references WHERE reference_hash = $1")
-            .bind(&scene.reference_hash)
-            .fetch_all(pool)
-            .await?;
+        let rows = sqlx::query(
+            "SELECT sr.scene, (SELECT COUNT(*) FROM scene_reference_names n WHERE n.key = sr.key AND n.name = $2) \
+             AS named FROM scene_references sr WHERE sr.reference_hash = $1",
+        )
+        .bind(&scene.reference_hash)
+        .bind(&scene.name)
+        .fetch_all(pool)
+        .await?;
         if rows.is_empty() {
             return Err(ServiceError::invalid(
                 "unknown_reference",
@@ -163,21 +175,20 @@ pub async fn check_upload(pool: &AnyPool, upload: &fbksd_exchange::runner_api::U
         }
         let (mut fits, mut made_for) = (false, Vec::new());
         for row in &rows {
-            let name: Option<String> = row.try_get("scene_name")?;
-            fits |= name.is_none_or(|n| n == scene.name);
+            fits |= row.try_get::<i64, _>("named")? > 0;
             made_for.push(row.try_get::<String, _>("scene")?);
         }
-        if fits {
-            continue;
+        if !fits {
+            return Err(ServiceError::invalid(
+                "unknown_reference",
+                format!(
+                    "{at}: reference {} was made for {}, and no runner asked for it under the name {:?}",
+                    scene.reference_hash,
+                    made_for.join(", "),
+                    scene.name
+                ),
+            ));
         }
-        return Err(ServiceError::invalid(
-            "unknown_reference",
-            format!(
-                "{at}: reference {} was made for {}, not for this scene",
-                scene.reference_hash,
-                made_for.join(", ")
-            ),
-        ));
     }
     Ok(())
 }

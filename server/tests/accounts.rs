@@ -131,7 +131,9 @@ async fn the_services_addresses_cannot_be_taken() {
     }
     let runner = FakeRunner::register(&server, "r").await;
     let key = fbksd_exchange::scenes::reference_key("test renderer 1", 4, "sha256:scene");
-    let (status, body) = runner.post("runners/references", json!({ "key": key, "scene": "experimental/sphere" })).await;
+    let (status, body) = runner
+        .post("runners/references", json!({ "key": key, "scene": "experimental/sphere", "name": "sphere" }))
+        .await;
     assert_eq!((status, body["state"].as_str()), (200, Some("building")), "{body}");
 }
 

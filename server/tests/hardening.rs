@@ -457,7 +457,10 @@ on_both_databases!(
         let (status, code, message) = put_results(&runner, &job, &swapped).await;
         assert_eq!((status, code.as_str()), (400, "unknown_reference"), "{message}");
         assert!(message.contains("scenes[1] (defocus-checkerboard)"), "{message}");
-        assert!(message.contains("was made for fake/sin-bands, not for this scene"), "{message}");
+        assert!(
+            message.contains("was made for fake/sin-bands, and no runner asked for it under the name"),
+            "{message}"
+        );
 
         // Fields the server joins to its folders, shows or stores row by row.
         let many_runs: Vec<Value> = (0..4097).map(|_| honest["runs"][0].clone()).collect();

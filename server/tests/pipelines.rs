@@ -266,7 +266,7 @@ on_both_databases!(a_reference_is_made_once_for_every_runner, |db: Db| async mov
     let server = spawn(db).await;
     let (maker, other) = (FakeRunner::register(&server, "maker").await, FakeRunner::register(&server, "other").await);
     let key = fbksd_exchange::scenes::reference_key("test renderer 1", 4, "sha256:scene");
-    let ask = json!({ "key": key, "scene": "experimental/sphere" });
+    let ask = json!({ "key": key, "scene": "experimental/sphere", "name": "sphere" });
 
     // Runners asking at once: one reference job for the key.
     let asks =
@@ -311,11 +311,15 @@ on_both_databases!(a_reference_is_made_once_for_every_runner, |db: Db| async mov
     assert_eq!(other.get(&format!("runners/references/{key}/files/secrets.txt")).await.0, 400);
     let unknown = "sha256:".to_string() + &"1".repeat(64);
     assert_eq!(other.get(&format!("runners/references/{unknown}/files/reference.exr")).await.0, 404);
-    assert_eq!(other.post("runners/references", json!({ "key": "latest", "scene": "x" })).await.0, 400);
+    assert_eq!(other.post("runners/references", json!({ "key": "latest", "scene": "x", "name": "x" })).await.0, 400);
+    // A runner older than the server, which sends no scene name, is told so.
+    let (status, body) = other.post("runners/references", json!({ "key": key, "scene": "experimental/sphere" })).await;
+    assert_eq!((status, body["error"].as_str()), (400, Some("invalid_scene")), "{body}");
+    assert!(body["message"].as_str().unwrap().contains("upgrade it"), "{body}");
 
     // A failed reference job is retried by the next ask.
     let key2 = fbksd_exchange::scenes::reference_key("test renderer 1", 4, "sha256:other scene");
-    let ask2 = json!({ "key": key2, "scene": "experimental/other" });
+    let ask2 = json!({ "key": key2, "scene": "experimental/other", "name": "other" });
     let (_, first) = maker.post("runners/references", ask2.clone()).await;
     let failing = maker.claim_with(json!({ "reference_keys": [key2] })).await.unwrap();
     let (status, _) =

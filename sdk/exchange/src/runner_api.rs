@@ -219,7 +219,9 @@ pub fn is_reference_file(name: &str) -> bool {
         || crate::scenes::FEATURE_BUFFERS.iter().any(|b| reference_buffer_file(b) == name)
 }
 
-/// A runner's request for a reference it lacks.
+/// A runner's ask for the reference of one of its scenes (at every start,
+/// for every scene: the service's reference is the one results are scored
+/// against).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReferenceRequest {
@@ -229,7 +231,9 @@ pub struct ReferenceRequest {
     pub scene: String,
     /// The scene's name as result sets give it
     /// ([`crate::results::path_safe_name`] of its `scene.json` name): a
-    /// result set may name this reference for a scene of this name only.
+    /// result set may name this reference only for a scene some runner
+    /// asked for it under. Required (empty only from runners older than it,
+    /// which the server refuses with a message saying so).
     #[serde(default)]
     pub name: String,
 }
