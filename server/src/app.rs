@@ -121,10 +121,8 @@ impl Application {
                 if let Err(e) = crate::jobs::expire_leases(&sweeper).await {
                     tracing::warn!("expiring leases: {e}");
                 }
-                if let Some(Err(e)) = match max_job_ms {
-                    Some(max) => Some(crate::jobs::stop_overdue(&sweeper, max).await),
-                    None => None,
-                } {
+                let Some(max) = max_job_ms else { continue };
+                if let Err(e) = crate::jobs::stop_overdue(&sweeper, max).await {
                     tracing::warn!("stopping jobs past max_job_seconds: {e}");
                 }
             }
