@@ -153,7 +153,9 @@ fn postgres_tool(program: &str, url: &str, args: &[&str]) -> anyhow::Result<std:
     let parsed = reqwest::Url::parse(url).ok().filter(|u| u.password().is_some());
     match parsed {
         Some(mut url) => {
-            command.env("PGPASSWORD", percent_decoded(url.password().unwrap_or_default()));
+            // A URL's password is %-escaped; the tools take it as it is.
+            let password = percent_encoding::percent_decode_str(url.password().unwrap_or_default());
+            command.env("PGPASSWORD", password.decode_utf8_lossy().as_ref());
             url.set_password(None).map_err(|()| anyhow::anyhow!("database_url: {url} takes no password"))?;
             command.arg("--dbname").arg(url.as_str())
         }
@@ -162,27 +164,6 @@ fn postgres_tool(program: &str, url: &str, args: &[&str]) -> anyhow::Result<std:
     };
     command.args(args);
     Ok(command)
-}
-
-/// `text` with its `%XX` escapes decoded (a URL's password is escaped).
-fn percent_decoded(text: &str) -> String {
-    let bytes = text.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        let hex = bytes.get(i + 1..i + 3).and_then(|h| u8::from_str_radix(std::str::from_utf8(h).ok()?, 16).ok());
-        match (bytes[i], hex) {
-            (b'%', Some(byte)) => {
-                out.push(byte);
-                i += 3;
-            }
-            (byte, _) => {
-                out.push(byte);
-                i += 1;
-            }
-        }
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// Runs a PostgreSQL tool; its error output names what failed.

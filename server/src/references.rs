@@ -104,11 +104,12 @@ pub async fn request(state: &AppState, request: &ReferenceRequest) -> Result<Ref
         ));
     }
     let name = request.name.as_str();
-    if name.is_empty() || name.len() > 100 || fbksd_exchange::results::path_safe_name(name) != name {
+    let max = fbksd_exchange::runner_api::limits::SCENE_NAME;
+    if !fbksd_exchange::runner_api::is_plain_name(name, max) {
         return Err(ServiceError::invalid(
             "invalid_scene",
             format!(
-                "scene name {name:?} must be 1 to 100 letters, digits, . - or _, as result sets name scenes \
+                "scene name {name:?} must be 1 to {max} letters, digits, . - or _, as result sets name scenes \
                  (a runner that sends none is older than this server: upgrade it)"
             ),
         ));

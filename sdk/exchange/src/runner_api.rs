@@ -431,6 +431,8 @@ pub mod limits {
     pub const METRICS: usize = 64;
     /// Tags of one scene.
     pub const TAGS: usize = 32;
+    /// Bytes of a scene's name.
+    pub const SCENE_NAME: usize = 100;
     /// Samples per pixel of one run.
     pub const SPP: u64 = 1 << 20;
 }
@@ -454,7 +456,7 @@ pub fn is_sha256(hash: &str) -> bool {
 
 /// A name (scene, tag, metric): 1 to `max` letters, digits, `.`, `-`, `_`,
 /// not starting with `.`, as [`crate::results::path_safe_name`] makes them.
-fn is_plain_name(name: &str, max: usize) -> bool {
+pub fn is_plain_name(name: &str, max: usize) -> bool {
     !name.is_empty()
         && name.len() <= max
         && !name.starts_with('.')
@@ -475,9 +477,8 @@ impl Upload {
         if self.runs.is_empty() {
             return Err("results: \"runs\" is empty".into());
         }
-        let too_many = |what: &str, n: usize, max: usize| {
-            (n > max).then(|| format!("results: {n} {what}; at most {max} are stored"))
-        };
+        let too_many =
+            |what: &str, n: usize, max: usize| (n > max).then(|| format!("{n} {what}; at most {max} are stored"));
         let all_repeats: usize = self.runs.iter().map(|r| r.repeats.len()).sum();
         let counts = [
             too_many("runs", self.runs.len(), limits::RUNS),
@@ -486,7 +487,7 @@ impl Upload {
             too_many("metrics", self.metrics.len(), limits::METRICS),
         ];
         if let Some(problem) = counts.into_iter().flatten().next() {
-            return Err(problem);
+            return Err(format!("results: {problem}"));
         }
         for (i, metric) in self.metrics.iter().enumerate() {
             let at = format!("results: metrics[{i}]");
@@ -502,12 +503,13 @@ impl Upload {
         }
         for (i, scene) in self.scenes.iter().enumerate() {
             let at = format!("results: scenes[{i}]");
-            if !is_plain_name(&scene.name, 100) {
-                return Err(format!("{at}: name {:?} must be 1 to 100 letters, digits, . - or _", scene.name));
+            if !is_plain_name(&scene.name, limits::SCENE_NAME) {
+                let max = limits::SCENE_NAME;
+                return Err(format!("{at}: name {:?} must be 1 to {max} letters, digits, . - or _", scene.name));
             }
             let at = format!("{at} ({})", scene.name);
             if let Some(problem) = too_many("tags", scene.tags.len(), limits::TAGS) {
-                return Err(format!("{at}: {}", problem.trim_start_matches("results: ")));
+                return Err(format!("{at}: {problem}"));
             }
             if let Some(tag) = scene.tags.iter().find(|t| !is_plain_name(t, 40)) {
                 return Err(format!("{at}: tag {tag:?} must be 1 to 40 letters, digits, . - or _"));
@@ -540,7 +542,7 @@ impl Upload {
                 return Err(format!("{at}: appears twice"));
             }
             if let Some(problem) = too_many("repeats", run.repeats.len(), limits::REPEATS) {
-                return Err(format!("{at}: {}", problem.trim_start_matches("results: ")));
+                return Err(format!("{at}: {problem}"));
             }
             if !run.log.is_empty() {
                 file(&at, "log", &run.log)?;
