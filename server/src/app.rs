@@ -32,6 +32,8 @@ pub struct AppState {
     pub throttle: crate::throttle::Throttle,
     /// Metrics for operators (`/metrics`).
     pub telemetry: crate::telemetry::Telemetry,
+    /// Techniques' descriptions read from their commits, kept.
+    pub checked: crate::pipelines::CheckedCommits,
 }
 
 impl AppState {
@@ -142,6 +144,7 @@ impl Application {
             public_boards: Default::default(),
             throttle: crate::throttle::Throttle::new(&config),
             telemetry: Default::default(),
+            checked: Default::default(),
         };
         // What ended jobs or a crash left in `uploads/`: at start, then hourly.
         let housekeeper = state.clone();

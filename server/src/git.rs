@@ -19,6 +19,15 @@
 //! Size: git itself refuses packs above `receive.maxInputSize` with a
 //! message the client prints; the bridge also caps the request body, which
 //! it spools to disk rather than holding in memory.
+//!
+//! Processes: clients are served by at most [`MAX_SERVED`] git processes at
+//! once, each caller (a user, a job, or all anonymous clients together) by
+//! at most [`MAX_REQUESTS_PER_CALLER`], each request for at most
+//! [`SERVE_TIME_LIMIT`]; the server's own reads (pages, pipelines' checks)
+//! have [`MAX_READS`] processes of their own. A clone lasts as long as its
+//! client reads, so slow anonymous clones would otherwise hold every
+//! process, and pushes, runners' clones and project pages would wait
+//! behind them.
 
 use axum::body::Body;
 use axum::http::{HeaderMap, Method, StatusCode};
@@ -163,7 +172,13 @@ pub struct GitRequest<'a> {
     pub query: &'a str,
     /// The request's headers.
     pub headers: &'a HeaderMap,
+    /// Who asks, as counted against [`MAX_REQUESTS_PER_CALLER`]: a user's
+    /// or a job's own key, or [`ANONYMOUS`].
+    pub caller: &'a str,
 }
+
+/// The caller that all anonymous clients are together.
+pub const ANONYMOUS: &str = "anonymous";
 
 /// The server's repositories.
 #[derive(Debug, Clone)]
@@ -175,13 +190,59 @@ pub struct GitHost {
     /// left is removed at start.
     spool: PathBuf,
     max_push_bytes: u64,
-    processes: std::sync::Arc<tokio::sync::Semaphore>,
+    /// `git http-backend` processes serving clients ([`MAX_SERVED`]).
+    serving: std::sync::Arc<tokio::sync::Semaphore>,
+    /// Requests per caller ([`MAX_REQUESTS_PER_CALLER`]).
+    callers: crate::slots::Slots,
+    /// The server's own git reads ([`MAX_READS`]).
+    reading: std::sync::Arc<tokio::sync::Semaphore>,
+    counts: std::sync::Arc<Counts>,
 }
 
-/// At most this many git processes run at once (pushes, fetches, reads):
-/// each holds memory and a core, and a flood of pushes or page views must
-/// queue, not fork without bound.
-const MAX_GIT_PROCESSES: usize = 16;
+/// Git processes started since the server started, and requests refused.
+#[derive(Debug, Default)]
+struct Counts {
+    served: std::sync::atomic::AtomicU64,
+    read: std::sync::atomic::AtomicU64,
+    refused: std::sync::atomic::AtomicU64,
+}
+
+/// What git is doing, for operators ([`GitHost::activity`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Activity {
+    /// `git http-backend` processes serving clients now.
+    pub serving: usize,
+    /// Git processes reading for the server now.
+    pub reading: usize,
+    /// Clients' requests served since start.
+    pub served: u64,
+    /// The server's own reads since start.
+    pub read: u64,
+    /// Clients' requests refused because their caller had as many running as it may.
+    pub refused: u64,
+}
+
+/// At most this many git processes serve clients at once (pushes,
+/// fetches, clones): each holds memory and a core, and a flood of them
+/// must queue, not fork without bound.
+pub const MAX_SERVED: usize = 16;
+
+/// At most this many requests of one caller are served at once; more are
+/// answered 429 at once rather than queued (a queued request holds a
+/// connection and its spooled body). A fetch or a push is two requests
+/// one after the other, so one at a time is all a client needs.
+pub const MAX_REQUESTS_PER_CALLER: usize = 4;
+
+/// At most this many git processes read for the server at once (project
+/// pages, pipelines' checks): apart from the clients', whose clones last
+/// as long as their clients read.
+pub const MAX_READS: usize = 8;
+
+/// How long one client's request may be served: a clone of the largest
+/// checkout (512 MiB) at 1 MiB/s, and then some. Past it the answer is cut
+/// (at its next chunk: a client that stops reading is closed sooner, by
+/// the connection's idle limit).
+pub const SERVE_TIME_LIMIT: std::time::Duration = std::time::Duration::from_secs(15 * 60);
 
 /// The largest fetch request body: a fetch's negotiation (the objects it
 /// wants and has) is a few kilobytes even for long histories.
@@ -328,8 +389,23 @@ impl GitHost {
             hooks,
             spool,
             max_push_bytes,
-            processes: std::sync::Arc::new(tokio::sync::Semaphore::new(MAX_GIT_PROCESSES)),
+            serving: std::sync::Arc::new(tokio::sync::Semaphore::new(MAX_SERVED)),
+            callers: crate::slots::Slots::new(MAX_REQUESTS_PER_CALLER, usize::MAX),
+            reading: std::sync::Arc::new(tokio::sync::Semaphore::new(MAX_READS)),
+            counts: Default::default(),
         })
+    }
+
+    /// What git is doing now, and has done since start.
+    pub fn activity(&self) -> Activity {
+        use std::sync::atomic::Ordering::Relaxed;
+        Activity {
+            serving: MAX_SERVED - self.serving.available_permits(),
+            reading: MAX_READS - self.reading.available_permits(),
+            served: self.counts.served.load(Relaxed),
+            read: self.counts.read.load(Relaxed),
+            refused: self.counts.refused.load(Relaxed),
+        }
     }
 
     /// The largest push accepted, in bytes.
@@ -341,14 +417,15 @@ impl GitHost {
         self.root.join(format!("{project_id}.git"))
     }
 
-    /// Runs git with at most [`MAX_GIT_PROCESSES`] at once, reading at most
+    /// Runs git with at most [`MAX_READS`] at once, reading at most
     /// `limit` of its output within [`GIT_TIME_LIMIT`]. Output is
     /// streamed and git is killed at the cap: a repository's content decides
     /// how much `ls-tree -r` or `cat-file` would print (a few KB of nested
     /// trees name ~10¹⁰ paths), so nothing of it is read unbounded.
     async fn git(&self, args: &[&str], dir: Option<&Path>, limit: Limit) -> Result<Vec<u8>, GitError> {
         let error = |message: String| GitError { command: args.join(" "), message, kind: GitErrorKind::Failed };
-        let _permit = self.processes.acquire().await.map_err(|e| error(e.to_string()))?;
+        let _permit = self.reading.acquire().await.map_err(|e| error(e.to_string()))?;
+        self.counts.read.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let mut command = Command::new("git");
         if let Some(dir) = dir {
             command.arg("-C").arg(dir);
@@ -510,8 +587,13 @@ impl GitHost {
     /// Answers one smart-HTTP request for a project's repository with
     /// `git http-backend`; `user` is who authenticated (for git's logs).
     pub async fn serve(&self, project_id: &str, request: GitRequest<'_>, body: Body, user: &str) -> Served {
-        let GitRequest { method, rest, query, headers } = request;
+        let GitRequest { method, rest, query, headers, caller } = request;
         let plain = |status: StatusCode, text: String| Served::Answered((status, text).into_response());
+        // Taken before the body is spooled: a caller's spooled bodies are bounded too.
+        let Ok(slot) = self.callers.take(caller) else {
+            self.counts.refused.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            return Served::Answered(busy(caller));
+        };
         let is_push = rest == "git-receive-pack";
         // A push's body is capped beyond git's own pack limit (`receive.maxInputSize`),
         // which answers with a message the client prints; a fetch sends only its
@@ -568,9 +650,11 @@ impl GitHost {
             command.env("FBKSD_PUSH_RECORD", record.path());
         }
         // Held until git ends: for a fetch, by the task that waits for it.
-        let Ok(permit) = self.processes.clone().acquire_owned().await else {
+        let Ok(permit) = self.serving.clone().acquire_owned().await else {
             return plain(StatusCode::SERVICE_UNAVAILABLE, "the server is shutting down\n".into());
         };
+        self.counts.served.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let deadline = tokio::time::Instant::now() + SERVE_TIME_LIMIT;
         let mut child = match command.spawn() {
             Ok(c) => c,
             Err(e) => return plain(StatusCode::INTERNAL_SERVER_ERROR, format!("cannot run git http-backend: {e}\n")),
@@ -628,14 +712,14 @@ impl GitHost {
             }
             // Fetches stream: a clone can be large.
             tokio::spawn(async move {
-                let _permit = permit;
+                let _held = (permit, slot);
                 let _ = child.wait().await;
                 let errors = stderr_task.await.unwrap_or_default();
                 if !errors.trim().is_empty() {
                     tracing::debug!("git http-backend: {}", errors.trim());
                 }
             });
-            let stream = tokio_util::io::ReaderStream::new(reader);
+            let stream = until(tokio_util::io::ReaderStream::new(reader), deadline);
             let response =
                 response.body(Body::from_stream(stream)).unwrap_or_else(|_| StatusCode::BAD_GATEWAY.into_response());
             return Served::Answered(response);
@@ -644,9 +728,23 @@ impl GitHost {
         // Pushes answer little; wait for the hooks to finish so the record is complete.
         // Its report-status is a few lines per ref; the cap only guards memory.
         let mut output = Vec::new();
-        let _ = (&mut reader).take(16 << 20).read_to_end(&mut output).await;
-        let exit = child.wait().await;
-        drop(permit);
+        let finished = tokio::time::timeout_at(deadline, async {
+            let _ = (&mut reader).take(16 << 20).read_to_end(&mut output).await;
+            child.wait().await
+        })
+        .await;
+        let exit = match finished {
+            Ok(exit) => exit,
+            Err(_) => {
+                let _ = child.kill().await;
+                tracing::warn!("a push to {project_id} ran past {} s and was stopped", SERVE_TIME_LIMIT.as_secs());
+                return plain(
+                    StatusCode::GATEWAY_TIMEOUT,
+                    format!("the push took longer than {} minutes and was stopped\n", SERVE_TIME_LIMIT.as_secs() / 60),
+                );
+            }
+        };
+        drop((permit, slot));
         let errors = stderr_task.await.unwrap_or_default();
         if !errors.trim().is_empty() {
             tracing::debug!("git http-backend (push): {}", errors.trim());
@@ -665,6 +763,46 @@ impl GitHost {
             false => Served::Pushed(pushed),
         }
     }
+}
+
+/// The answer to a caller with [`MAX_REQUESTS_PER_CALLER`] requests running.
+/// Anonymous clients are asked to sign in: git sends the credentials it
+/// has (a clone URL's token) only when asked, so a signed-in clone of a
+/// public project starts anonymous, and must not wait behind strangers.
+fn busy(caller: &str) -> Response {
+    use axum::http::header::{RETRY_AFTER, WWW_AUTHENTICATE};
+    if caller == ANONYMOUS {
+        let text = format!(
+            "the server is serving as many anonymous git requests as it does at once ({MAX_REQUESTS_PER_CALLER}): \
+             sign in (any user name, a personal access token as the password) or try again in a minute\n"
+        );
+        let headers = [(WWW_AUTHENTICATE, "Basic realm=\"FBKSD\", charset=\"UTF-8\""), (RETRY_AFTER, "60")];
+        return (StatusCode::UNAUTHORIZED, headers, text).into_response();
+    }
+    let text = format!(
+        "you have {MAX_REQUESTS_PER_CALLER} git requests running on this server, the most one caller may: \
+         let one finish and try again\n"
+    );
+    (StatusCode::TOO_MANY_REQUESTS, [(RETRY_AFTER, "60")], text).into_response()
+}
+
+/// `stream`, ended with an error at its first chunk past `deadline`: the
+/// connection is then closed, git's pipe breaks and its process ends.
+fn until<S>(
+    stream: S,
+    deadline: tokio::time::Instant,
+) -> impl futures_util::Stream<Item = std::io::Result<axum::body::Bytes>>
+where
+    S: futures_util::Stream<Item = std::io::Result<axum::body::Bytes>>,
+{
+    use futures_util::StreamExt;
+    stream.map(move |chunk| match tokio::time::Instant::now() < deadline {
+        true => chunk,
+        false => Err(std::io::Error::new(
+            std::io::ErrorKind::TimedOut,
+            format!("served for longer than {} s", SERVE_TIME_LIMIT.as_secs()),
+        )),
+    })
 }
 
 /// A request body on disk: git reads it from there, so a request never
@@ -721,6 +859,18 @@ mod tests {
         // Without side-band (bare report-status pkt-lines) nothing can be added.
         let plain = b"000eunpack ok\n0000".to_vec();
         assert_eq!(with_remote_messages(plain.clone(), &["x".into()]), plain);
+    }
+
+    #[tokio::test]
+    async fn an_answer_served_past_its_time_limit_is_cut_at_its_next_chunk() {
+        use futures_util::StreamExt;
+        let chunks = || futures_util::stream::iter([Ok(axum::body::Bytes::from("PACK")), Ok("more".into())]);
+        let later = tokio::time::Instant::now() + std::time::Duration::from_secs(3600);
+        let served: Vec<_> = until(chunks(), later).collect().await;
+        assert!(served.iter().all(|c| c.is_ok()), "{served:?}");
+        let passed = tokio::time::Instant::now();
+        let cut: Vec<_> = until(chunks(), passed).collect().await;
+        assert!(cut.iter().all(|c| c.as_ref().is_err_and(|e| e.kind() == std::io::ErrorKind::TimedOut)), "{cut:?}");
     }
 
     #[test]

@@ -181,10 +181,46 @@ pub const MAX_CHECKOUT_BYTES: u64 = 512 << 20;
 /// The largest info.json read.
 const MAX_INFO_BYTES: usize = 64 * 1024;
 
+/// Descriptions of commits that passed [`sanity_check`], by project and
+/// commit: a commit never changes, so a project page viewed again reads
+/// only which commit `main` is (one `rev-parse`, not `ls-tree` and
+/// `cat-file` per view). At most [`CheckedCommits::KEPT`], forgotten all
+/// at once when full; problems are not kept (a busy server's failed read
+/// must not stick).
+#[derive(Clone, Default)]
+pub struct CheckedCommits(std::sync::Arc<std::sync::Mutex<std::collections::HashMap<(String, String), TechniqueInfo>>>);
+
+impl CheckedCommits {
+    /// Descriptions kept at most (each a few hundred bytes).
+    pub const KEPT: usize = 1024;
+
+    fn get(&self, project_id: &str, commit: &str) -> Option<TechniqueInfo> {
+        let kept = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        kept.get(&(project_id.to_string(), commit.to_string())).cloned()
+    }
+
+    fn keep(&self, project_id: &str, commit: &str, info: &TechniqueInfo) {
+        let mut kept = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if kept.len() >= Self::KEPT {
+            kept.clear();
+        }
+        kept.insert((project_id.to_string(), commit.to_string()), info.clone());
+    }
+}
+
 /// Checks the repository at `commit`: its parsed info.json, or what is wrong.
 /// Sizes are checked before anything is read, so a repository built to be
 /// big costs the server no more than a small one.
 pub async fn sanity_check(state: &AppState, project: &Project, commit: &str) -> Result<TechniqueInfo, String> {
+    if let Some(info) = state.checked.get(&project.id, commit) {
+        return Ok(info);
+    }
+    let info = read_info(state, project, commit).await?;
+    state.checked.keep(&project.id, commit, &info);
+    Ok(info)
+}
+
+async fn read_info(state: &AppState, project: &Project, commit: &str) -> Result<TechniqueInfo, String> {
     let files = state.git.files(&project.id, commit, MAX_FILES).await.map_err(|e| match e.kind {
         crate::git::GitErrorKind::TooLarge => format!(
             "the commit holds more than {MAX_FILES} files: a technique's repository must stay below that \

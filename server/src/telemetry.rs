@@ -82,6 +82,12 @@ struct Metrics {
     queued: Family<KindLabels, Gauge>,
     running: Family<KindLabels, Gauge>,
     runners: Family<HealthLabels, Gauge>,
+    git_running: Family<KindLabels, Gauge>,
+    git_started: Family<KindLabels, Counter>,
+    git_refused: Counter,
+    /// Git's counters are copied from [`crate::git::GitHost::activity`] at
+    /// each scrape, one scrape at a time (two would add the same increase).
+    git_copy: std::sync::Mutex<()>,
 }
 
 impl Default for Telemetry {
@@ -94,6 +100,10 @@ impl Default for Telemetry {
             queued: Family::default(),
             running: Family::default(),
             runners: Family::default(),
+            git_running: Family::default(),
+            git_started: Family::default(),
+            git_refused: Counter::default(),
+            git_copy: Default::default(),
             registry: Registry::default(),
         };
         registry.register("http_request_duration_seconds", "HTTP answers by route", metrics.http.clone());
@@ -109,6 +119,21 @@ impl Default for Telemetry {
             "runners",
             "Registered runners: healthy (heard from lately) or silent",
             metrics.runners.clone(),
+        );
+        registry.register(
+            "git_processes",
+            "Git processes now: serving clients (serve) or reading for the server (read)",
+            metrics.git_running.clone(),
+        );
+        registry.register(
+            "git_processes_started",
+            "Git processes started by this instance: serving clients (serve) or reading for the server (read)",
+            metrics.git_started.clone(),
+        );
+        registry.register(
+            "git_requests_refused",
+            "Git requests refused because their caller had as many running as it may (this instance's)",
+            metrics.git_refused.clone(),
         );
         Telemetry(Arc::new(Metrics { registry, ..metrics }))
     }
@@ -151,9 +176,23 @@ impl Telemetry {
         let healthy = runners.iter().filter(|r| r.healthy(&state.config, now)).count() as i64;
         self.0.runners.get_or_create(&HealthLabels { health: "healthy".into() }).set(healthy);
         self.0.runners.get_or_create(&HealthLabels { health: "silent".into() }).set(runners.len() as i64 - healthy);
+        self.copy_git(state.git.activity());
         let mut text = String::new();
         prometheus_client::encoding::text::encode(&mut text, &self.0.registry).map_err(sqlx::Error::decode)?;
         Ok(text)
+    }
+}
+
+impl Telemetry {
+    fn copy_git(&self, git: crate::git::Activity) {
+        let _one_at_a_time = self.0.git_copy.lock().unwrap_or_else(|e| e.into_inner());
+        for (kind, now, started) in [("serve", git.serving, git.served), ("read", git.reading, git.read)] {
+            let labels = KindLabels { kind: kind.into() };
+            self.0.git_running.get_or_create(&labels).set(now as i64);
+            let counter = self.0.git_started.get_or_create(&labels);
+            counter.inc_by(started.saturating_sub(counter.get()));
+        }
+        self.0.git_refused.inc_by(git.refused.saturating_sub(self.0.git_refused.get()));
     }
 }
 

@@ -2,9 +2,9 @@
 //! headers on every answer, a cap on live-log streams, result files
 //! streamed from disk, private result sets kept out of public jobs, result
 //! sets that belong to their project (not its name), owner-only modes in
-//! the data directory, request bodies streamed rather than held, and
-//! results a runner may upload only against the service's references,
-//! every field checked.
+//! the data directory, request bodies streamed rather than held, results
+//! a runner may upload only against the service's references, every field
+//! checked, and git processes that slow clones cannot all hold.
 
 mod common;
 
@@ -496,3 +496,129 @@ on_both_databases!(
         assert_eq!((status, body["runs"].as_array().map(Vec::len)), (200, Some(4)), "{body}");
     }
 );
+
+/// Sends a v0 `git-upload-pack` request for `commit` as a client that reads
+/// the answer's headers and then nothing more (a slow clone); the status
+/// and the connection, held open.
+async fn slow_clone(url: &str, project: &str, commit: &str) -> (u16, tokio::net::TcpStream) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let host = url.trim_start_matches("http://");
+    let mut stream = tokio::net::TcpStream::connect(host).await.unwrap();
+    let body = format!("0032want {commit}\n00000009done\n");
+    let head = format!(
+        "POST /git/{project}.git/git-upload-pack HTTP/1.1\r\nHost: {host}\r\n\
+         Content-Type: application/x-git-upload-pack-request\r\nContent-Length: {}\r\n\r\n",
+        body.len()
+    );
+    stream.write_all((head + &body).as_bytes()).await.unwrap();
+    let mut answer = Vec::new();
+    while !answer.ends_with(b"\r\n\r\n") {
+        let mut byte = [0u8];
+        assert_eq!(stream.read(&mut byte).await.unwrap(), 1, "closed before its headers: {answer:?}");
+        answer.push(byte[0]);
+    }
+    let status = String::from_utf8_lossy(&answer).split(' ').nth(1).unwrap().parse().unwrap();
+    (status, stream)
+}
+
+/// Runs git with `args` in `dir` off the runtime's threads (the server runs
+/// in this process); (success, stdout and stderr).
+async fn git_off_thread(dir: &std::path::Path, args: &[&str]) -> (bool, String) {
+    let (dir, args) = (dir.to_path_buf(), args.iter().map(|a| a.to_string()).collect::<Vec<_>>());
+    let out =
+        tokio::task::spawn_blocking(move || common::git(&dir, &args.iter().map(String::as_str).collect::<Vec<_>>()))
+            .await
+            .unwrap();
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr))
+}
+
+/// One series of the server's `/metrics`.
+async fn metric(server: &TestServer, series: &str) -> f64 {
+    let text = reqwest::get(format!("{}/metrics", server.url)).await.unwrap().text().await.unwrap();
+    text.lines()
+        .find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {series} in {text}"))
+}
+
+/// Clones last as long as their clients read, and a git process serves
+/// each. Before, 16 slow anonymous clones of a public project held all 16
+/// processes, and pushes, signed-in clones and project pages waited behind
+/// them (with no end: a client that reads a byte now and then is never
+/// idle). Now all anonymous clients together have 4 requests at a time
+/// (more are asked to sign in, so that git sends the token it has: a
+/// signed-in clone of a public project starts anonymous), each caller 4,
+/// the server's own reads (pages) their own processes, and a page reads a
+/// commit's files once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_clones_leave_git_to_everyone_else() {
+    let server = spawn(Db::Sqlite).await;
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "big-box", "public").await;
+    // A pack larger than every buffer between git and a client that stops
+    // reading (pipe, sockets, the server's own): random bytes do not compress.
+    let repo = technique_repository("box-filter-cpp");
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let noise: Vec<u8> = (0..32 << 20)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state as u8
+        })
+        .collect();
+    std::fs::write(repo.path().join("weights.bin"), noise).unwrap();
+    common::commit_all(repo.path(), "weights");
+    let owner_url = server.clone_url("big-box", &ada.token);
+    let (pushed, output) = git_off_thread(repo.path(), &["push", &owner_url, "main"]).await;
+    assert!(pushed, "{output}");
+    let commit = String::from_utf8(common::git(repo.path(), &["rev-parse", "HEAD"]).stdout).unwrap();
+
+    // 16 anonymous clients clone and stop reading: 4 are served, 12 are asked to sign in.
+    let mut held = Vec::new();
+    let mut statuses = Vec::new();
+    for _ in 0..16 {
+        let (status, stream) = slow_clone(&server.url, "big-box", commit.trim()).await;
+        statuses.push(status);
+        held.push(stream);
+    }
+    assert_eq!(statuses.iter().filter(|s| **s == 200).count(), 4, "{statuses:?}");
+    assert_eq!(statuses.iter().filter(|s| **s == 401).count(), 12, "{statuses:?}");
+    assert_eq!(metric(&server, "fbksd_git_requests_refused_total").await, 12.0);
+    let anonymous_url = format!("{}/git/big-box.git", server.url);
+    let (listed, output) = git_off_thread(repo.path(), &["ls-remote", &anonymous_url]).await;
+    // git asks for credentials (here, with no terminal, it cannot).
+    assert!(!listed && output.contains("could not read Username"), "{output}");
+
+    // Everyone else is served meanwhile: the owner pushes, another user clones, the page shows.
+    std::fs::write(repo.path().join("notes.txt"), "second\n").unwrap();
+    common::commit_all(repo.path(), "second");
+    let (pushed, output) = git_off_thread(repo.path(), &["push", &owner_url, "main"]).await;
+    assert!(pushed, "the owner's push: {output}");
+    let bob = server.user("bob@example.org").await;
+    let clone = tempfile::tempdir().unwrap();
+    let bob_url = server.clone_url("big-box", &bob.token);
+    let (cloned, output) = git_off_thread(clone.path(), &["clone", "-q", &bob_url, "copy"]).await;
+    assert!(cloned, "a signed-in clone: {output}");
+    assert!(clone.path().join("copy/notes.txt").is_file());
+    let read_before = metric(&server, "fbksd_git_processes_started_total{kind=\"read\"}").await;
+    for view in 0..4 {
+        let page = reqwest::get(format!("{}/projects/big-box", server.url)).await.unwrap();
+        assert_eq!(page.status(), 200, "view {view}");
+        assert!(page.text().await.unwrap().contains("Box filter (C++)"), "view {view}");
+    }
+    // The push's pipeline read the new head's files (ls-tree, cat-file): each view reads only which commit main is.
+    let reads = metric(&server, "fbksd_git_processes_started_total{kind=\"read\"}").await - read_before;
+    assert_eq!(reads, 4.0, "git reads for 4 views of one commit");
+
+    // The slow clients go: their places come back.
+    drop(held);
+    let since = std::time::Instant::now();
+    loop {
+        let (listed, output) = git_off_thread(repo.path(), &["ls-remote", &anonymous_url]).await;
+        if listed {
+            break;
+        }
+        assert!(since.elapsed() < Duration::from_secs(60), "anonymous clients still refused: {output}");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}

@@ -8,13 +8,12 @@
 //! client cannot starve the others.
 
 use crate::routes::ApiError;
+use crate::slots::{Full, Slot, Slots};
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::Response;
-use std::collections::HashMap;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::pin::Pin;
-use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
@@ -46,23 +45,13 @@ pub const MAX_STREAMS_PER_CALLER: usize = 8;
 /// Live-log streams the server keeps open in all.
 pub const MAX_STREAMS: usize = 256;
 
-/// Counts open event streams, per caller and in all.
+/// Counts open event streams, per caller and in all ([`crate::slots`]).
 #[derive(Clone)]
-pub struct StreamSlots(Arc<Mutex<Slots>>);
+pub struct StreamSlots(Slots);
 
-struct Slots {
-    per_caller: HashMap<String, usize>,
-    total: usize,
-    max_per_caller: usize,
-    max_total: usize,
-}
-
-/// One open stream: the count is given back when it is dropped, however
+/// One open stream: its place is given back when it is dropped, however
 /// the stream ends (its job ended, or its client went away).
-pub struct StreamSlot {
-    slots: StreamSlots,
-    caller: String,
-}
+pub type StreamSlot = Slot;
 
 impl Default for StreamSlots {
     fn default() -> StreamSlots {
@@ -73,52 +62,32 @@ impl Default for StreamSlots {
 impl StreamSlots {
     /// Slots for at most `max_per_caller` streams per caller and `max_total` in all.
     pub fn new(max_per_caller: usize, max_total: usize) -> StreamSlots {
-        StreamSlots(Arc::new(Mutex::new(Slots { per_caller: HashMap::new(), total: 0, max_per_caller, max_total })))
+        StreamSlots(Slots::new(max_per_caller, max_total))
     }
 
     /// A slot for `caller`, or 429 saying which limit is reached.
     pub fn take(&self, caller: &str) -> Result<StreamSlot, ApiError> {
-        let mut slots = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        let mine = slots.per_caller.get(caller).copied().unwrap_or(0);
-        if mine >= slots.max_per_caller {
-            return Err(ApiError::new(
+        self.0.take(caller).map_err(|full| match full {
+            Full::Caller(mine) => ApiError::new(
                 StatusCode::TOO_MANY_REQUESTS,
                 "too_many_streams",
                 format!(
                     "you already follow {mine} live logs, the most one user may: close another job's page \
                      (or read this log at /api/v1/jobs/<id>/log) and try again"
                 ),
-            ));
-        }
-        if slots.total >= slots.max_total {
-            return Err(ApiError::new(
+            ),
+            Full::All => ApiError::new(
                 StatusCode::TOO_MANY_REQUESTS,
                 "too_many_streams",
                 "the server is streaming as many live logs as it can: try again in a minute \
                  (or read the log at /api/v1/jobs/<id>/log)",
-            ));
-        }
-        slots.total += 1;
-        *slots.per_caller.entry(caller.to_string()).or_insert(0) += 1;
-        Ok(StreamSlot { slots: self.clone(), caller: caller.to_string() })
+            ),
+        })
     }
 
     /// Streams open now, in all.
     pub fn open(&self) -> usize {
-        self.0.lock().map_or(0, |s| s.total)
-    }
-}
-
-impl Drop for StreamSlot {
-    fn drop(&mut self) {
-        let mut slots = self.slots.0.lock().unwrap_or_else(|e| e.into_inner());
-        slots.total = slots.total.saturating_sub(1);
-        if let Some(n) = slots.per_caller.get_mut(&self.caller) {
-            *n -= 1;
-            if *n == 0 {
-                slots.per_caller.remove(&self.caller);
-            }
-        }
+        self.0.taken()
     }
 }
 
@@ -304,11 +273,11 @@ mod tests {
         let slots = StreamSlots::new(2, 3);
         let a1 = slots.take("a").unwrap();
         let _a2 = slots.take("a").unwrap();
-        let refused = slots.take("a").err().expect("a third stream of one caller");
+        let refused = slots.take("a").expect_err("a third stream of one caller");
         assert_eq!(refused.status, StatusCode::TOO_MANY_REQUESTS);
         assert!(refused.message.contains("close another job's page"), "{}", refused.message);
         let _b1 = slots.take("b").unwrap();
-        let full = slots.take("c").err().expect("over the server's limit");
+        let full = slots.take("c").expect_err("over the server's limit");
         assert!(full.message.contains("as many live logs as it can"), "{}", full.message);
         drop(a1);
         assert_eq!(slots.open(), 2);

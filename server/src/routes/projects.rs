@@ -346,11 +346,16 @@ pub async fn git(
         };
     }
     let remote_user = user.map(|u| u.email.clone()).unwrap_or_else(|| "anonymous".into());
+    let caller = match &caller {
+        GitCaller::Anonymous => crate::git::ANONYMOUS.to_string(),
+        GitCaller::User(user) => format!("user {}", user.id),
+        GitCaller::Job(job) => format!("job {job}"),
+    };
     let served = state
         .git
         .serve(
             &project.id,
-            crate::git::GitRequest { method: &method, rest: &rest, query, headers: &headers },
+            crate::git::GitRequest { method: &method, rest: &rest, query, headers: &headers, caller: &caller },
             body,
             &remote_user,
         )
