@@ -300,6 +300,8 @@ const EMAIL_TOKEN_MS: i64 = 48 * 3600 * 1000;
 
 /// Stores a new one-time token for `purpose` and returns it (to be mailed).
 pub async fn issue_email_token(pool: &AnyPool, user_id: &str, purpose: &str) -> Result<String, sqlx::Error> {
+    // Expired tokens go as new ones come: the table holds two days' mail.
+    sqlx::query("DELETE FROM email_tokens WHERE expires_at < $1").bind(now_ms()).execute(pool).await?;
     let token = random_token();
     sqlx::query("INSERT INTO email_tokens (token_hash, user_id, purpose, expires_at) VALUES ($1, $2, $3, $4)")
         .bind(digest(&token))
@@ -403,6 +405,8 @@ pub struct NewSession {
 pub async fn open_session(pool: &AnyPool, user_id: &str, hours: u64) -> Result<NewSession, sqlx::Error> {
     let (token, csrf_token) = (random_token(), random_token());
     let now = now_ms();
+    // Expired sessions go as new ones open: the table holds live ones only.
+    sqlx::query("DELETE FROM sessions WHERE expires_at < $1").bind(now).execute(pool).await?;
     sqlx::query(
         "INSERT INTO sessions (token_hash, user_id, csrf_token, created_at, expires_at) VALUES ($1, $2, $3, $4, $5)",
     )
@@ -498,12 +502,26 @@ pub struct AccessToken {
     pub last_used_at: Option<i64>,
 }
 
+/// Access tokens one account may hold (each is a row checked at every
+/// token's use and listed on the settings page).
+pub const MAX_ACCESS_TOKENS: usize = 50;
+
 /// Creates a personal access token named `name`; returns its id and the
 /// token, which is shown this once.
 pub async fn create_access_token(pool: &AnyPool, user_id: &str, name: &str) -> Result<(String, String), ServiceError> {
     let name = name.trim();
     if name.is_empty() || name.chars().count() > 100 {
         return Err(ServiceError::invalid("invalid_name", "a token needs a name of 1 to 100 characters"));
+    }
+    let held: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM access_tokens WHERE user_id = $1")
+        .bind(user_id)
+        .fetch_one(pool)
+        .await?;
+    if held as usize >= MAX_ACCESS_TOKENS {
+        return Err(ServiceError::forbidden(
+            "too_many_tokens",
+            format!("you have {held} access tokens, the most one account may: revoke one you no longer use first"),
+        ));
     }
     let (id, token) = (uuid::Uuid::new_v4().to_string(), format!("{ACCESS_TOKEN_PREFIX}{}", random_token()));
     sqlx::query("INSERT INTO access_tokens (id, user_id, name, token_hash, created_at) VALUES ($1, $2, $3, $4, $5)")

@@ -66,6 +66,9 @@ pub struct Config {
     pub max_upload_bytes: u64,
     /// Queued jobs (builds and runs) a user may have before new runs are refused.
     pub max_queued_jobs_per_user: u64,
+    /// Projects one account may own (each is a repository on disk and a
+    /// row in every list): past it, creating one is refused.
+    pub max_projects_per_user: u64,
     /// Benchmark runs a user may request per 24 hours; infrastructure
     /// failures and runs cancelled before they started do not count.
     pub max_runs_per_day: u64,
@@ -164,6 +167,7 @@ impl Default for Config {
             max_upload_bytes: 256 << 20,
             max_queued_jobs_per_user: 3,
             max_runs_per_day: 10,
+            max_projects_per_user: 100,
             login_limit_per_address: RateLimit::new(10, Duration::from_secs(15 * 60)),
             login_limit_per_ip: RateLimit::new(30, Duration::from_secs(60)),
             mail_limit_per_address: RateLimit::new(5, Duration::from_secs(3600)),

@@ -161,6 +161,20 @@ async fn create_with_repository(
     name: &ProjectName,
     visibility: Visibility,
 ) -> Result<Project, ServiceError> {
+    let owned: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM projects WHERE owner_id = $1")
+        .bind(&owner.id)
+        .fetch_one(&state.pool)
+        .await?;
+    let most = state.config.max_projects_per_user;
+    if owned as u64 >= most {
+        return Err(ServiceError::forbidden(
+            "too_many_projects",
+            format!(
+                "you own {owned} projects, the most one account may ({most}): delete one you no longer need \
+                 (its published results stay on the board) or ask the administrator for more"
+            ),
+        ));
+    }
     let project = insert(&state.pool, owner, name, visibility).await?;
     if let Err(e) = state.git.create(&project.id).await {
         sqlx::query("DELETE FROM projects WHERE id = $1").bind(&project.id).execute(&state.pool).await?;
@@ -221,11 +235,29 @@ pub fn not_found(name: &str) -> ServiceError {
     ServiceError::not_found(format!("no project named {name:?} that you can see"))
 }
 
-/// Projects `user` can see (all of theirs, and others' internal and public ones), by name.
-pub async fn visible(pool: &AnyPool, user: Option<&User>) -> Result<Vec<Project>, sqlx::Error> {
-    let rows = sqlx::query(&format!("SELECT {COLUMNS} FROM projects ORDER BY name")).fetch_all(pool).await?;
-    let projects: Result<Vec<Project>, _> = rows.iter().map(project_of).collect();
-    Ok(projects?.into_iter().filter(|p| p.readable_by(user)).collect())
+/// Projects listed on one page ([`visible`]).
+pub const PAGE: usize = 100;
+
+/// Projects `user` can see (all of theirs, and others' internal and public
+/// ones), by name, after the name `after`: at most [`PAGE`] of them and
+/// whether more follow. Chosen by the database, so a list of many
+/// projects costs one page's rows, whoever asks.
+pub async fn visible(pool: &AnyPool, user: Option<&User>, after: &str) -> Result<(Vec<Project>, bool), sqlx::Error> {
+    let (seen, owner) = match user {
+        None => ("visibility = 'public'", ""),
+        Some(u) if u.is_admin => ("1 = 1", ""),
+        Some(u) => ("(visibility <> 'private' OR owner_id = $3)", u.id.as_str()),
+    };
+    let sql = format!("SELECT {COLUMNS} FROM projects WHERE name > $1 AND {seen} ORDER BY name LIMIT $2");
+    let mut query = sqlx::query(&sql).bind(after).bind(PAGE as i64 + 1);
+    if !owner.is_empty() {
+        query = query.bind(owner);
+    }
+    let rows = query.fetch_all(pool).await?;
+    let mut projects = rows.iter().map(project_of).collect::<Result<Vec<Project>, _>>()?;
+    let more = projects.len() > PAGE;
+    projects.truncate(PAGE);
+    Ok((projects, more))
 }
 
 /// Ids of a user's projects (to delete their repositories with the account).

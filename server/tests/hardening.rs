@@ -622,3 +622,83 @@ async fn slow_clones_leave_git_to_everyone_else() {
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
 }
+
+/// Rows a user makes stay bounded: projects and access tokens per account
+/// have a most, expired sessions and mail tokens go as new ones come, and
+/// the list of projects is read a page at a time. Before, each was kept
+/// for ever, and `/projects` loaded every row for every anonymous view.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn what_accounts_make_stays_bounded_and_lists_come_in_pages() {
+    let server = spawn_with(Db::Sqlite, |c| c.max_projects_per_user = 102).await;
+    let ada = server.user("ada@example.org").await;
+    for n in 0..102 {
+        server.create_project(&ada, &format!("p{n:03}"), "public").await;
+    }
+    let create = |name: &str| {
+        ada.api(Method::POST, format!("{}/api/v1/projects", server.url))
+            .json(&json!({ "name": name, "visibility": "public" }))
+            .send()
+    };
+    let (status, refused) = json_of(create("one-more").await.unwrap()).await;
+    assert_eq!((status, refused["error"].as_str()), (403, Some("too_many_projects")), "{refused}");
+    assert!(refused["message"].as_str().unwrap().contains("102 projects"), "{refused}");
+    let bob = server.user("bob@example.org").await;
+    server.create_project(&bob, "bobs-own", "private").await;
+
+    // 100 a page, by name, the next page linked; others' private projects never listed.
+    let anonymous = reqwest::get(format!("{}/api/v1/projects", server.url)).await.unwrap();
+    let next = anonymous.headers().get("link").expect("a link to the next page").to_str().unwrap().to_string();
+    let first: Vec<Value> = anonymous.json().await.unwrap();
+    assert_eq!(first.len(), 100);
+    assert_eq!((first[0]["name"].as_str(), first[99]["name"].as_str()), (Some("p000"), Some("p099")));
+    let next_url = next.trim_start_matches('<').split('>').next().unwrap().to_string();
+    assert!(next.ends_with("rel=\"next\"") && next_url.ends_with("?after=p099"), "{next}");
+    let second = reqwest::get(&next_url).await.unwrap();
+    assert!(second.headers().get("link").is_none(), "the last page links nowhere");
+    let second: Vec<Value> = second.json().await.unwrap();
+    let names: Vec<_> = second.iter().map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["p100", "p101"]);
+    let (_, bobs) = json_of(bob.api(Method::GET, next_url.clone()).send().await.unwrap()).await;
+    let names: Vec<_> = bobs.as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["p100", "p101"], "bobs-own sorts first: on bob's first page");
+    let page = reqwest::get(format!("{}/projects", server.url)).await.unwrap().text().await.unwrap();
+    assert!(page.contains("/projects/p099") && !page.contains("/projects/p100"), "100 on the first page");
+    assert!(page.contains("href=\"/projects?after=p099\""), "a link to the next page");
+    let page = reqwest::get(format!("{}/projects?after=p099", server.url)).await.unwrap().text().await.unwrap();
+    assert!(page.contains("/projects/p101") && !page.contains("bobs-own") && !page.contains("Next page"));
+
+    // Access tokens: 50 an account (ada made one when she logged in).
+    let token = |name: String| {
+        let create = ada.browser.post(format!("{}/api/v1/tokens", server.url)).header("X-CSRF-Token", &ada.csrf);
+        create.json(&json!({ "name": name })).send()
+    };
+    for n in 1..50 {
+        assert_eq!(token(format!("t{n}")).await.unwrap().status(), 201, "token {n}");
+    }
+    let (status, refused) = json_of(token("t50".into()).await.unwrap()).await;
+    assert_eq!((status, refused["error"].as_str()), (403, Some("too_many_tokens")), "{refused}");
+
+    // An expired session and mail token are gone once a new one is made.
+    let db = fbksd_server::db::connect(&server.config().database_url()).await.unwrap();
+    let count = |table: &'static str| {
+        let db = db.clone();
+        async move {
+            let sql = format!("SELECT COUNT(*) FROM {table}");
+            sqlx::query_scalar::<_, i64>(&sql).fetch_one(&db).await.unwrap()
+        }
+    };
+    sqlx::query("UPDATE sessions SET expires_at = 1").execute(&db).await.unwrap();
+    sqlx::query("UPDATE email_tokens SET expires_at = 1").execute(&db).await.unwrap();
+    let (sessions, mail_tokens) = (count("sessions").await, count("email_tokens").await);
+    assert!(sessions >= 2 && mail_tokens >= 2, "{sessions} sessions, {mail_tokens} mail tokens");
+    let _again = server.log_in("bob@example.org", "a long enough password", server.browser()).await;
+    assert_eq!(count("sessions").await, 1, "only the new session is left");
+    let reset = reqwest::Client::new()
+        .post(format!("{}/api/v1/password-resets", server.url))
+        .json(&json!({ "email": "bob@example.org" }))
+        .send()
+        .await
+        .unwrap();
+    assert!(reset.status().is_success(), "{}", reset.status());
+    assert_eq!(count("email_tokens").await, 1, "only the new mail token is left");
+}

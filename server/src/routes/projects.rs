@@ -54,13 +54,31 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(project_json(&state, &project))))
 }
 
-/// `GET /api/v1/projects`: the projects the caller can see.
+/// Where a list of projects starts: after the name `after` (none: the first).
+#[derive(serde::Deserialize, Default)]
+pub struct ListPage {
+    /// A project name (names are plain: lower-case letters, digits, `-` and `_`).
+    #[serde(default)]
+    pub after: String,
+}
+
+/// `GET /api/v1/projects[?after=<name>]`: the projects the caller can see,
+/// by name, [`projects::PAGE`] at a time; when more follow, a `Link`
+/// header names the next page (`rel="next"`).
 pub async fn list(
     State(state): State<AppState>,
     MaybeUser(user): MaybeUser,
-) -> Result<Json<serde_json::Value>, ApiError> {
-    let list = projects::visible(&state.pool, user.as_ref()).await?;
-    Ok(Json(json!(list.iter().map(|p| project_json(&state, p)).collect::<Vec<_>>())))
+    Query(page): Query<ListPage>,
+) -> Result<Response, ApiError> {
+    let (list, more) = projects::visible(&state.pool, user.as_ref(), &page.after).await?;
+    let body = Json(json!(list.iter().map(|p| project_json(&state, p)).collect::<Vec<_>>()));
+    Ok(match (more, list.last()) {
+        (true, Some(last)) => {
+            let next = format!("<{}/api/v1/projects?after={}>; rel=\"next\"", state.public_url, last.name);
+            ([(header::LINK, next)], body).into_response()
+        }
+        _ => body.into_response(),
+    })
 }
 
 /// `GET /api/v1/projects/{name}`: a project, its jobs and result sets.

@@ -13,16 +13,23 @@ struct ProjectRow {
 struct ProjectsPage {
     nav: Nav,
     projects: Vec<ProjectRow>,
+    /// The last name shown, when more follow.
+    next: Option<String>,
 }
 
-/// `GET /projects`.
-pub async fn projects_page(State(state): State<AppState>, Visitor(nav): Visitor) -> PageResult {
-    let projects = projects::visible(&state.pool, nav.user.as_ref())
-        .await?
+/// `GET /projects[?after=<name>]`: a page of the projects the visitor can see.
+pub async fn projects_page(
+    State(state): State<AppState>,
+    Visitor(nav): Visitor,
+    axum::extract::Query(page): axum::extract::Query<crate::routes::projects::ListPage>,
+) -> PageResult {
+    let (projects, more) = projects::visible(&state.pool, nav.user.as_ref(), &page.after).await?;
+    let next = more.then(|| projects.last().map(|p| p.name.clone())).flatten();
+    let projects = projects
         .into_iter()
         .map(|p| ProjectRow { name: p.name, visibility: p.visibility.as_str(), created: when(p.created_at) })
         .collect();
-    Ok(render(&ProjectsPage { nav, projects }))
+    Ok(render(&ProjectsPage { nav, projects, next }))
 }
 
 struct EnvironmentView {
