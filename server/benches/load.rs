@@ -10,7 +10,11 @@
 //! each on its own keep-alive connection, for SECONDS per page and prints
 //! requests per second and latency percentiles; then the same pages and a
 //! job page again while an attacker floods the log-in (wrong passwords from
-//! many addresses, as fast as 8 connections go) and 20 live job logs stream.
+//! many addresses, as fast as 8 connections go) and 20 live job logs stream;
+//! then the leaderboard and the private page once more, under git and
+//! metrics attacks (16 slow anonymous clones, 10 connections of oversized
+//! fetch requests, a flood of made-up methods), with the owner's push, the
+//! attackers' answers, the metric series and the peak memory.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -18,6 +22,8 @@ mod common;
 use common::{push, spawn_with, technique_repository, Db, FakeRunner};
 use reqwest::Method;
 use serde_json::json;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// The bench's 10 scenes.
@@ -241,6 +247,129 @@ async fn main() {
     }
     println!("log-in flood answers (HTTP status: count): {answers:?}");
     drop(streams);
+
+    under_git_and_metrics_attack(&server, &ada, &pages, connections, seconds).await;
+}
+
+/// The process's peak resident memory so far, in MiB (`VmHWM`: the server
+/// and the bench's own clients, which share the process).
+fn peak_mib() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap() >> 10
+}
+
+/// Tasks that repeat `attack` until told to stop; each returns its
+/// answers' statuses, counted.
+fn keep_attacking<F, Fut>(tasks: usize, attack: F) -> (Arc<AtomicBool>, Vec<tokio::task::JoinHandle<Counts>>)
+where
+    F: Fn(usize, usize) -> Fut + Clone + Send + 'static,
+    Fut: std::future::Future<Output = u16> + Send,
+{
+    let going = Arc::new(AtomicBool::new(true));
+    let handles = (0..tasks)
+        .map(|task| {
+            let (going, attack) = (going.clone(), attack.clone());
+            tokio::spawn(async move {
+                let mut counts = Counts::new();
+                let mut n = 0;
+                while going.load(Ordering::Relaxed) {
+                    n += 1;
+                    *counts.entry(attack(task, n).await).or_default() += 1;
+                }
+                counts
+            })
+        })
+        .collect();
+    (going, handles)
+}
+
+/// Statuses of answers: how many of each.
+type Counts = std::collections::BTreeMap<u16, usize>;
+
+async fn stop(going: Arc<AtomicBool>, tasks: Vec<tokio::task::JoinHandle<Counts>>) -> Counts {
+    going.store(false, Ordering::Relaxed);
+    let mut all = Counts::new();
+    for task in tasks {
+        for (status, n) in task.await.unwrap() {
+            *all.entry(status).or_default() += n;
+        }
+    }
+    all
+}
+
+/// Issue 49's attacks at once: 16 anonymous clones of a large public
+/// repository that stop reading, 10 connections sending 64 MiB anonymous
+/// fetch requests again and again, and 4 flooding `/metrics` with made-up
+/// methods; meanwhile the leaderboard and the private page are read and
+/// the owner pushes.
+async fn under_git_and_metrics_attack(
+    server: &common::TestServer,
+    ada: &common::TestUser,
+    pages: &[(&str, String, &Headers<'_>)],
+    connections: usize,
+    seconds: u64,
+) {
+    server.create_project(ada, "big", "public").await;
+    let repo = common::repository_too_big_to_buffer();
+    let owner_url = server.clone_url("big", &ada.token);
+    assert!(push(repo.path(), &owner_url, &[]).0);
+    let commit = String::from_utf8(common::git(repo.path(), &["rev-parse", "HEAD"]).stdout).unwrap();
+    // A histogram's buckets are one series with it.
+    let series = |text: &str| text.lines().filter(|l| !l.starts_with('#') && !l.contains("_bucket{")).count();
+    let metrics = format!("{}/metrics", server.url);
+    let series_before = series(&reqwest::get(&metrics).await.unwrap().text().await.unwrap());
+    let peak_before = peak_mib();
+
+    let (mut clones, mut held) = (Counts::new(), Vec::new());
+    for _ in 0..16 {
+        let (status, stream) = common::slow_clone(&server.url, "big", commit.trim()).await;
+        *clones.entry(status).or_default() += 1;
+        held.push(stream);
+    }
+    let url = server.url.clone();
+    let (oversized, oversizing) = keep_attacking(10, move |_, _| {
+        let url = url.clone();
+        async move {
+            let headers = "Content-Type: application/x-git-upload-pack-request\r\n";
+            common::send_zeros(&url, "POST", "/git/big.git/git-upload-pack", 64 << 20, headers).await
+        }
+    });
+    let url = metrics.clone();
+    let (flood, flooding) = keep_attacking(4, move |task, n| {
+        let url = url.clone();
+        async move {
+            let method = Method::from_bytes(format!("FLOOD{task}X{n}").as_bytes()).unwrap();
+            reqwest::Client::new().request(method, &url).send().await.map_or(0, |r| r.status().as_u16())
+        }
+    });
+
+    println!(
+        "under 16 slow anonymous clones, 10 connections of 64 MiB fetch requests and a /metrics method flood \
+         (4 connections):"
+    );
+    let push = {
+        let (dir, url) = (repo.path().to_path_buf(), owner_url.clone());
+        tokio::task::spawn_blocking(move || {
+            std::fs::write(dir.join("notes.txt"), "under attack\n").unwrap();
+            common::commit_all(&dir, "under attack");
+            let began = Instant::now();
+            (push(&dir, &url, &[]), began.elapsed())
+        })
+    };
+    for (label, url, headers) in [&pages[0], &pages[2]] {
+        print_figures(label, &hammer(url, headers, connections, seconds).await);
+    }
+    let ((pushed, output), took) = push.await.unwrap();
+    assert!(pushed, "the owner's push under attack: {output}");
+    let (oversized, flood) = (stop(oversized, oversizing).await, stop(flood, flooding).await);
+    drop(held);
+    let series_after = series(&reqwest::get(&metrics).await.unwrap().text().await.unwrap());
+    println!("slow clones' answers: {clones:?} (4 served, the rest asked to sign in)");
+    println!("oversized fetch requests' answers: {oversized:?}");
+    println!("metrics flood answers: {flood:?}; /metrics series {series_before} before, {series_after} after");
+    println!("the owner's push under attack: landed in {:.2} s", took.as_secs_f64());
+    println!("peak memory of the process (server and clients): {peak_before} MiB before, {} MiB after", peak_mib());
 }
 
 fn print_figures(label: &str, f: &Figures) {

@@ -323,32 +323,6 @@ fn peak_memory() -> u64 {
     line.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap() << 10
 }
 
-/// Sends `method path` with a body of `length` zero bytes, a megabyte at a
-/// time, as a client that never holds it whole; the answer's status (the
-/// server may answer and close before the body is all sent).
-async fn send_zeros(url: &str, method: &str, path: &str, length: u64, headers: &str) -> u16 {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let host = url.trim_start_matches("http://");
-    let mut stream = tokio::net::TcpStream::connect(host).await.unwrap();
-    let head = format!(
-        "{method} {path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {length}\r\n{headers}Connection: close\r\n\r\n"
-    );
-    stream.write_all(head.as_bytes()).await.unwrap();
-    let zeros = vec![0u8; 1 << 20];
-    let mut left = length;
-    while left > 0 {
-        let n = left.min(zeros.len() as u64) as usize;
-        if stream.write_all(&zeros[..n]).await.is_err() {
-            break;
-        }
-        left -= n as u64;
-    }
-    let mut answer = Vec::new();
-    let _ = stream.read_to_end(&mut answer).await;
-    let answer = String::from_utf8_lossy(&answer);
-    answer.split(' ').nth(1).and_then(|code| code.parse().ok()).unwrap_or_else(|| panic!("no answer: {answer:?}"))
-}
-
 /// Request bodies are streamed to disk, never held whole: before, each git
 /// request was read into memory up to 2 × `max_push_bytes` + 1 MiB (also
 /// anonymous fetches of a public project, before any git slot was asked
@@ -378,7 +352,7 @@ async fn request_bodies_are_streamed_not_held() {
     let push_headers =
         format!("Authorization: Basic {basic}\r\nContent-Type: application/x-git-receive-pack-request\r\n");
     let receive_pack = format!("{git}/git-receive-pack");
-    let pushes = (0..4).map(|_| send_zeros(&server.url, "POST", &receive_pack, 60 * MIB, &push_headers));
+    let pushes = (0..4).map(|_| common::send_zeros(&server.url, "POST", &receive_pack, 60 * MIB, &push_headers));
     let answers = futures_util::future::join_all(pushes).await;
     assert!(answers.iter().all(|s| *s != 413 && *s != 401), "within the cap: {answers:?}");
     let after_pushes = peak_memory();
@@ -388,9 +362,12 @@ async fn request_bodies_are_streamed_not_held() {
         (after_pushes - before) / MIB
     );
     // Past the cap (2 × 32 + 1 MiB), refused; an anonymous fetch request past 16 MiB too.
-    assert_eq!(send_zeros(&server.url, "POST", &receive_pack, 70 * MIB, &push_headers).await, 413);
+    assert_eq!(common::send_zeros(&server.url, "POST", &receive_pack, 70 * MIB, &push_headers).await, 413);
     let fetch_headers = "Content-Type: application/x-git-upload-pack-request\r\n";
-    assert_eq!(send_zeros(&server.url, "POST", &format!("{git}/git-upload-pack"), 20 * MIB, fetch_headers).await, 413);
+    assert_eq!(
+        common::send_zeros(&server.url, "POST", &format!("{git}/git-upload-pack"), 20 * MIB, fetch_headers).await,
+        413
+    );
     // Nothing of them is left beside the repositories.
     let spool = server.config().data_dir.join("git-spool");
     assert_eq!(std::fs::read_dir(&spool).unwrap().count(), 0, "{}", spool.display());
@@ -398,7 +375,7 @@ async fn request_bodies_are_streamed_not_held() {
     // A runner's 150 MiB file lands whole on disk.
     let auth = format!("Authorization: Bearer {}\r\n", job.token);
     let file = format!("/api/v1/jobs/{}/files/sin-bands/big.exr", job.id);
-    assert_eq!(send_zeros(&server.url, "PUT", &file, 150 * MIB, &auth).await, 204);
+    assert_eq!(common::send_zeros(&server.url, "PUT", &file, 150 * MIB, &auth).await, 204);
     let staged = server.config().data_dir.join("uploads").join(&job.id).join("sin-bands");
     assert_eq!(std::fs::metadata(staged.join("big.exr")).unwrap().len(), 150 * MIB);
     let after_upload = peak_memory();
@@ -409,12 +386,16 @@ async fn request_bodies_are_streamed_not_held() {
     );
     // The next 100 MiB pass the job's 200 MiB budget: refused there, and nothing of them kept.
     let over = format!("/api/v1/jobs/{}/files/sin-bands/over.exr", job.id);
-    assert_eq!(send_zeros(&server.url, "PUT", &over, 100 * MIB, &auth).await, 413);
+    assert_eq!(common::send_zeros(&server.url, "PUT", &over, 100 * MIB, &auth).await, 413);
     let left: Vec<_> = std::fs::read_dir(&staged).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(left, ["big.exr"], "the refused upload left a file");
     // What the refused upload had charged was given back: 40 MiB more still fit.
     let more = format!("/api/v1/jobs/{}/files/sin-bands/more.exr", job.id);
-    assert_eq!(send_zeros(&server.url, "PUT", &more, 40 * MIB, &auth).await, 204, "the budget was kept charged");
+    assert_eq!(
+        common::send_zeros(&server.url, "PUT", &more, 40 * MIB, &auth).await,
+        204,
+        "the budget was kept charged"
+    );
 }
 
 /// PUTs `upload` as the results of `job`; the answer's status, error code and message.
@@ -497,30 +478,6 @@ on_both_databases!(
     }
 );
 
-/// Sends a v0 `git-upload-pack` request for `commit` as a client that reads
-/// the answer's headers and then nothing more (a slow clone); the status
-/// and the connection, held open.
-async fn slow_clone(url: &str, project: &str, commit: &str) -> (u16, tokio::net::TcpStream) {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let host = url.trim_start_matches("http://");
-    let mut stream = tokio::net::TcpStream::connect(host).await.unwrap();
-    let body = format!("0032want {commit}\n00000009done\n");
-    let head = format!(
-        "POST /git/{project}.git/git-upload-pack HTTP/1.1\r\nHost: {host}\r\n\
-         Content-Type: application/x-git-upload-pack-request\r\nContent-Length: {}\r\n\r\n",
-        body.len()
-    );
-    stream.write_all((head + &body).as_bytes()).await.unwrap();
-    let mut answer = Vec::new();
-    while !answer.ends_with(b"\r\n\r\n") {
-        let mut byte = [0u8];
-        assert_eq!(stream.read(&mut byte).await.unwrap(), 1, "closed before its headers: {answer:?}");
-        answer.push(byte[0]);
-    }
-    let status = String::from_utf8_lossy(&answer).split(' ').nth(1).unwrap().parse().unwrap();
-    (status, stream)
-}
-
 /// Runs git with `args` in `dir` off the runtime's threads (the server runs
 /// in this process); (success, stdout and stderr).
 async fn git_off_thread(dir: &std::path::Path, args: &[&str]) -> (bool, String) {
@@ -556,18 +513,7 @@ async fn slow_clones_leave_git_to_everyone_else() {
     server.create_project(&ada, "big-box", "public").await;
     // A pack larger than every buffer between git and a client that stops
     // reading (pipe, sockets, the server's own): random bytes do not compress.
-    let repo = technique_repository("box-filter-cpp");
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let noise: Vec<u8> = (0..32 << 20)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state as u8
-        })
-        .collect();
-    std::fs::write(repo.path().join("weights.bin"), noise).unwrap();
-    common::commit_all(repo.path(), "weights");
+    let repo = common::repository_too_big_to_buffer();
     let owner_url = server.clone_url("big-box", &ada.token);
     let (pushed, output) = git_off_thread(repo.path(), &["push", &owner_url, "main"]).await;
     assert!(pushed, "{output}");
@@ -577,7 +523,7 @@ async fn slow_clones_leave_git_to_everyone_else() {
     let mut held = Vec::new();
     let mut statuses = Vec::new();
     for _ in 0..16 {
-        let (status, stream) = slow_clone(&server.url, "big-box", commit.trim()).await;
+        let (status, stream) = common::slow_clone(&server.url, "big-box", commit.trim()).await;
         statuses.push(status);
         held.push(stream);
     }

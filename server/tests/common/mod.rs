@@ -698,3 +698,73 @@ fn decode_quoted_printable(text: &str) -> String {
     }
     String::from_utf8_lossy(&out).into_owned()
 }
+
+/// Sends `method path` with a body of `length` zero bytes, a megabyte at a
+/// time, as a client that never holds it whole; the answer's status (the
+/// server may answer and close before the body is all sent).
+pub async fn send_zeros(url: &str, method: &str, path: &str, length: u64, headers: &str) -> u16 {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let host = url.trim_start_matches("http://");
+    let mut stream = tokio::net::TcpStream::connect(host).await.unwrap();
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {length}\r\n{headers}Connection: close\r\n\r\n"
+    );
+    stream.write_all(head.as_bytes()).await.unwrap();
+    let zeros = vec![0u8; 1 << 20];
+    let mut left = length;
+    while left > 0 {
+        let n = left.min(zeros.len() as u64) as usize;
+        if stream.write_all(&zeros[..n]).await.is_err() {
+            break;
+        }
+        left -= n as u64;
+    }
+    let mut answer = Vec::new();
+    let _ = stream.read_to_end(&mut answer).await;
+    let answer = String::from_utf8_lossy(&answer);
+    answer.split(' ').nth(1).and_then(|code| code.parse().ok()).unwrap_or_else(|| panic!("no answer: {answer:?}"))
+}
+
+/// Sends a v0 `git-upload-pack` request for `commit` as a client that reads
+/// the answer's headers and then nothing more (a slow clone); the status
+/// and the connection, held open.
+pub async fn slow_clone(url: &str, project: &str, commit: &str) -> (u16, tokio::net::TcpStream) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let host = url.trim_start_matches("http://");
+    let mut stream = tokio::net::TcpStream::connect(host).await.unwrap();
+    let body = format!("0032want {commit}\n00000009done\n");
+    let head = format!(
+        "POST /git/{project}.git/git-upload-pack HTTP/1.1\r\nHost: {host}\r\n\
+         Content-Type: application/x-git-upload-pack-request\r\nContent-Length: {}\r\n\r\n",
+        body.len()
+    );
+    stream.write_all((head + &body).as_bytes()).await.unwrap();
+    let mut answer = Vec::new();
+    while !answer.ends_with(b"\r\n\r\n") {
+        let mut byte = [0u8];
+        assert_eq!(stream.read(&mut byte).await.unwrap(), 1, "closed before its headers: {answer:?}");
+        answer.push(byte[0]);
+    }
+    let status = String::from_utf8_lossy(&answer).split(' ').nth(1).unwrap().parse().unwrap();
+    (status, stream)
+}
+
+/// The SDK's C++ box filter with 32 MiB of random bytes beside it, committed
+/// on `main`: a pack larger than every buffer between git and a client
+/// that stops reading (pipe, sockets, the server's own), since random
+/// bytes do not compress.
+pub fn repository_too_big_to_buffer() -> tempfile::TempDir {
+    let repo = technique_repository("box-filter-cpp");
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let noise: Vec<u8> = (0..32 << 20)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state as u8
+        })
+        .collect();
+    std::fs::write(repo.path().join("weights.bin"), noise).unwrap();
+    commit_all(repo.path(), "weights");
+    repo
+}
