@@ -210,6 +210,11 @@ on_both_databases!(the_private_page_shows_a_result_beside_the_leaderboard_to_its
     assert_eq!(status, 200);
     assert!(board.contains("ada-filter") && board.contains("bob-filter"));
     assert!(board.contains("sin-bands") && board.contains("16 spp"));
+    // Hovering "Technique time" says it holds start-up, which the equal-time cost leaves out.
+    assert!(
+        board.contains("start-up (process start, imports, model loading) included. Equal time uses Cost"),
+        "the technique time's title"
+    );
     // Sorting by SSIM (higher is better) and filtering by tag.
     let (_, by_tag) = page(reqwest::Client::new(), "/results/?sort=SSIM&tag=dof".into()).await;
     assert!(

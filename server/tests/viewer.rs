@@ -334,6 +334,30 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
     assert_eq!(png, serde_json::json!({ "type": "image/png", "width": 1120 }), "the PNG export at twice the size");
     let csv = browser.eval("return FBKSD.viewer.chartCsv();").await;
     assert_eq!(csv.as_str().unwrap().lines().count(), 1 + 3 * SPPS.len(), "{csv}");
+    // A technique named like a formula stays text in a spreadsheet (its author chose the name).
+    let csv = browser
+        .eval(r#"return FBKSD.chartCsv([{ name: '=HYPERLINK("http://x.example","y")', points: [{ spp: 4, x: 1, y: 2 }] }, { name: "@SUM(A1)", points: [{ spp: 4, x: 1, y: 2 }] }], "ms", "MSE");"#)
+        .await;
+    let rows: Vec<&str> = csv.as_str().unwrap().lines().skip(1).collect();
+    assert_eq!(rows, [r#""'=HYPERLINK(""http://x.example"",""y"")",4,1,2"#, r#""'@SUM(A1)",4,1,2"#]);
+
+    // A pixel file is decompressed no further than its header says: a runner
+    // could upload kilobytes that inflate to gigabytes in every viewer's tab.
+    let refused = browser
+        .eval_async(
+            r#"const header = (w, h, c) => { const b = new Uint8Array(20), v = new DataView(b.buffer); b.set([70, 66, 80, 88]); v.setUint32(4, 1, true); v.setUint32(8, w, true); v.setUint32(12, h, true); v.setUint32(16, c, true); return b; };
+            const gzip = (parts) => new Response(new Blob(parts).stream().pipeThrough(new CompressionStream("gzip"))).arrayBuffer();
+            const why = async (parts) => { try { await FBKSD.decodePixels(await gzip(parts), "x.fbpx"); return "decoded"; } catch (e) { return e.message; } };
+            return [await why([header(2, 2, 1), new Uint8Array(64 << 20)]), await why([header(100000, 100000, 3)])];"#,
+        )
+        .await;
+    assert_eq!(
+        refused,
+        serde_json::json!([
+            "x.fbpx: longer than its header says",
+            "x.fbpx: its header says 30000000000 values, more than the viewer opens (67108864)"
+        ])
+    );
 
     // The ranking follows the tag filter; Ada's row stands out.
     let all_scenes = browser.text("table.ranking tbody tr:first-child td:nth-child(2)").await;
@@ -365,6 +389,11 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
     // Each run's costs are on the page.
     let costs = browser.text("table.costs").await;
     assert!(costs.contains("12.0 MiB") && costs.contains("ok") && costs.contains("log"), "{costs}");
+    let titles = browser
+        .eval("return ['Start-up', 'Technique time'].map(h => [...document.querySelectorAll('table.costs th')].find(th => th.textContent === h).title);")
+        .await;
+    assert!(titles[0].as_str().unwrap().contains("not charged"), "{titles}");
+    assert!(titles[1].as_str().unwrap().contains("start-up included"), "{titles}");
 
     screenshot(&browser, "viewer-charts.png", "section.viewer-charts").await;
     browser.close().await;

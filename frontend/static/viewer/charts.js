@@ -123,7 +123,13 @@
   };
 
   FBKSD.chartCsv = function (series, xLabel, yLabel) {
-    const quote = (s) => '"' + String(s).replace(/"/g, '""') + '"';
+    // Technique names are their authors' own: a cell that starts like a
+    // formula (= + - @, tab, return) is kept text with a leading apostrophe,
+    // or a spreadsheet opening the file would run it.
+    const quote = (s) => {
+      const text = String(s);
+      return '"' + (/^[=+\-@\t\r]/.test(text) ? "'" + text : text).replace(/"/g, '""') + '"';
+    };
     const lines = ["technique,spp," + quote(xLabel) + "," + quote(yLabel)];
     for (const s of series) for (const p of s.points) lines.push([quote(s.name), p.spp, p.x, p.y].join(","));
     return lines.join("\n") + "\n";

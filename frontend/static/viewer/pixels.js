@@ -11,7 +11,15 @@
 (function () {
   const FBKSD = (window.FBKSD = window.FBKSD || {});
 
-  const cache = new Map(); // address → Promise<Pixels>
+  // address → Promise<Pixels>, least recently asked for first; at most
+  // MAX_CACHED_BYTES of pixels are kept (a session that steps through
+  // every scene and technique would otherwise keep every image).
+  const cache = new Map();
+  const cachedBytes = new Map(); // address → bytes, once loaded
+  const MAX_CACHED_BYTES = 768 * 1024 * 1024;
+  // The most values one pixel file may hold (4096² RGB is 50 M): its
+  // header says how many before they are decompressed.
+  const MAX_VALUES = 64 * 1024 * 1024;
   const pendingScripts = new Map(); // address → resolve(bytes)
 
   window.fbksdPixels = function (address, base64) {
@@ -44,9 +52,57 @@
     return response.arrayBuffer();
   }
 
-  async function gunzip(buffer) {
-    const stream = new Blob([buffer]).stream().pipeThrough(new DecompressionStream("gzip"));
-    return new Response(stream).arrayBuffer();
+  // Undoes the gzip, reading no more than the header announces: a file
+  // uploaded by a runner could be a few kilobytes that decompress to
+  // gigabytes, and the tab would hold them all before the size was checked.
+  async function gunzip(buffer, address) {
+    const reader = new Blob([buffer]).stream().pipeThrough(new DecompressionStream("gzip")).getReader();
+    const header = new Uint8Array(20);
+    let raw = null, filled = 0;
+    for (;;) {
+      const { done, value } = await reader.read();
+      if (done) break;
+      let chunk = value;
+      if (!raw) {
+        const take = Math.min(20 - filled, chunk.length);
+        header.set(chunk.subarray(0, take), filled);
+        filled += take;
+        chunk = chunk.subarray(take);
+        if (filled < 20) continue;
+        const view = new DataView(header.buffer);
+        const n = view.getUint32(8, true) * view.getUint32(12, true) * view.getUint32(16, true);
+        if (n > MAX_VALUES) {
+          reader.cancel();
+          throw new Error(address + ": its header says " + n + " values, more than the viewer opens (" + MAX_VALUES + ")");
+        }
+        raw = new Uint8Array(20 + 4 * n);
+        raw.set(header);
+      }
+      if (filled + chunk.length > raw.length) {
+        reader.cancel();
+        throw new Error(address + ": longer than its header says");
+      }
+      raw.set(chunk, filled);
+      filled += chunk.length;
+    }
+    if (!raw) throw new Error(address + ": not an FBKSD pixel file");
+    return raw.buffer.slice(0, filled);
+  }
+
+  // Parses a pixel file as it was stored (gzip), bounded by its header.
+  FBKSD.decodePixels = async (buffer, address) => parse(await gunzip(buffer, address), address);
+
+  function keep(address, pixels) {
+    cachedBytes.set(address, pixels.planar.byteLength);
+    let total = 0;
+    for (const bytes of cachedBytes.values()) total += bytes;
+    for (const oldest of cache.keys()) {
+      if (total <= MAX_CACHED_BYTES || oldest === address) break;
+      if (!cachedBytes.has(oldest)) continue; // still loading: it holds nothing yet
+      total -= cachedBytes.get(oldest);
+      cache.delete(oldest);
+      cachedBytes.delete(oldest);
+    }
   }
 
   // Parses a decompressed pixel file into planar float32 channels.
@@ -71,13 +127,19 @@
 
   // The pixels at `address` (cached), loaded as the document's delivery says.
   FBKSD.loadPixels = function (address, delivery) {
-    if (!cache.has(address)) {
+    let pixels = cache.get(address);
+    if (pixels) {
+      cache.delete(address); // asked for again: the most recent
+    } else {
       const bytes = delivery === "script" ? loadScript(address) : fetchBytes(address);
-      const pixels = bytes.then(gunzip).then((raw) => parse(raw, address));
-      pixels.catch(() => cache.delete(address));
-      cache.set(address, pixels);
+      pixels = bytes.then((buffer) => FBKSD.decodePixels(buffer, address));
+      pixels.then(
+        (loaded) => cache.get(address) === pixels && keep(address, loaded),
+        () => cache.get(address) === pixels && cache.delete(address)
+      );
     }
-    return cache.get(address);
+    cache.set(address, pixels);
+    return pixels;
   };
 
   // An error map (PNG) as an image element, cached.

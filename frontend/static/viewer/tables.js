@@ -112,10 +112,19 @@
     return v.toFixed(i ? 1 : 0) + " " + units[i];
   }
 
+  // What the time columns count, on hover: start-up is shown, and only Cost is the equal-time axis.
+  const timeTitles = {
+    Cost: "CPU time after the technique's first request, plus its samples at the scene's render rate: the equal-time axis",
+    "Start-up": "Technique start to its first request (process start, imports, model loading): shown, not charged",
+    "Technique time": "Wall time from the technique's start to its result, less its waits for samples: start-up included",
+  };
+
   FBKSD.drawCosts = function (table, doc, scene) {
     const head = document.createElement("tr");
     for (const h of ["Technique", "spp", "Status", "Seeds", "Cost", "Technique CPU", "Start-up", "Technique time", "Time to result", "Render time", "Wall", "CPU time", "Peak memory", "Samples", ...doc.metrics.map((m) => m.acronym), "Log"]) {
-      head.append(cell("th", h));
+      const th = cell("th", h);
+      if (timeTitles[h]) th.title = timeTitles[h];
+      head.append(th);
     }
     const rows = [];
     for (const t of doc.techniques) {
