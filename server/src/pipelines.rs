@@ -300,6 +300,18 @@ pub async fn start(
                 return Err(e);
             }
             let not = if kind == JobKind::Build { "not built" } else { "not run" };
+            // Each push makes a row, and pushes are cheap: past a day's
+            // most, a refusal is told to the pusher and not kept.
+            if refusals_today(state, &user.id).await? >= REFUSALS_KEPT_PER_DAY {
+                return Err(ServiceError::too_many(
+                    "refusal_not_kept",
+                    format!(
+                        "{not}: {} (this refusal is not kept in the project's history: \
+                         it holds the last {REFUSALS_KEPT_PER_DAY} of a day)",
+                        e.message
+                    ),
+                ));
+            }
             cancelled = Some(format!("{not}: {}", e.message));
         }
     }
@@ -410,6 +422,7 @@ pub async fn start_push(
         let branch = update.name.trim_start_matches("refs/heads/");
         match start(state, project, user, &update.new, branch, request.clone(), Source::Push).await {
             Ok(started) => messages.push(describe(state, &started.job, branch)),
+            Err(e) if e.code == "refusal_not_kept" => messages.push(format!("FBKSD: {branch}: {}", e.message)),
             Err(e) => {
                 tracing::error!("pipeline for push to {}: {}", project.name, e.message);
                 messages.push(format!("FBKSD: no pipeline started for {branch}: {}", e.message));
@@ -443,6 +456,22 @@ pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> Strin
         (JobState::Cancelled, _) => format!("FBKSD: {what}: {first_line}\nFBKSD: details: {url}"),
         (_, _) => format!("FBKSD: {first_line}"),
     }
+}
+
+/// Pipelines refused over a quota that are kept as cancelled jobs, per user
+/// and 24 hours (the pusher is told of every refusal).
+pub const REFUSALS_KEPT_PER_DAY: i64 = 20;
+
+/// The user's jobs cancelled before they started in the last 24 hours.
+async fn refusals_today(state: &AppState, user_id: &str) -> Result<i64, sqlx::Error> {
+    sqlx::query_scalar(
+        "SELECT COUNT(*) FROM jobs WHERE user_id = $1 AND state = 'cancelled' AND started_at IS NULL \
+         AND created_at > $2",
+    )
+    .bind(user_id)
+    .bind(now_ms() - 24 * 3600 * 1000)
+    .fetch_one(&state.pool)
+    .await
 }
 
 /// Builds allowed per user and day: a build is much cheaper than a run, so

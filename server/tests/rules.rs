@@ -238,6 +238,29 @@ on_both_databases!(quotas_bound_queued_jobs_and_daily_runs, |db: Db| async move 
     assert_eq!((status, body["error"].as_str()), (429, Some("quota_runs")), "{body}");
 });
 
+/// Each push over a quota was kept as a cancelled job, and pushes of empty
+/// commits are cheap: a loop of them filled the jobs table without end.
+/// Now a day keeps 20 refusals per user; later ones are told, not kept.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn refusals_over_a_quota_are_kept_only_so_many_a_day() {
+    let server = spawn_with(Db::Sqlite, |c| c.max_queued_jobs_per_user = 1).await;
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "pushy", "private").await;
+    let repo = technique_repository("box-filter-python");
+    let url = server.clone_url("pushy", &ada.token);
+    assert!(push(repo.path(), &url, &["FBKSD_RUN"]).0, "one run queued");
+    let kept = fbksd_server::pipelines::REFUSALS_KEPT_PER_DAY as usize;
+    for n in 0..kept + 2 {
+        common::commit_all(repo.path(), &format!("again {n}"));
+        let (pushed, output) = push(repo.path(), &url, &["FBKSD_RUN"]);
+        assert!(pushed && output.contains("not run: you have 1 jobs queued"), "push {n}: {output}");
+        assert_eq!(output.contains("not kept"), n >= kept, "push {n}: {output}");
+    }
+    let jobs = jobs_of(&server, &ada, "pushy").await;
+    let cancelled = jobs.iter().filter(|j| j["state"] == "cancelled").count();
+    assert_eq!((jobs.len(), cancelled), (1 + kept, kept), "the queued run and {kept} refusals");
+}
+
 on_both_databases!(administrators_cancel_requeue_hide_and_start_seasons, |db: Db| async move {
     let server = spawn(db).await;
     let admin = server.admin().await;
