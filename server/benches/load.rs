@@ -3,6 +3,9 @@
 //!
 //! `cargo bench -p fbksd-server --bench load [-- SECONDS [CONNECTIONS [TECHNIQUES]]]`
 //!
+//! The pages: the leaderboard (as HTML, gzipped as a browser asks, and as
+//! JSON), a private results page and its viewer document.
+//!
 //! It starts a server on SQLite (or on PostgreSQL with
 //! `FBKSD_BENCH_POSTGRES=1`, on the test server `deploy/setup.sh` starts),
 //! publishes TECHNIQUES techniques (default 20) benchmarked on 10 scenes at
@@ -184,11 +187,12 @@ async fn main() {
     // A browser asks for gzip; the other rows take the body as it is.
     let gzip = [("Accept-Encoding", "gzip, deflate, br")];
     let owner = [("Cookie", cookie.as_str())];
-    let pages: [(&str, String, &Headers); 4] = [
+    let pages: [(&str, String, &Headers); 5] = [
         ("GET /results/ (leaderboard)", format!("{}/results/", server.url), &[]),
         ("  … as a browser asks (gzip)", format!("{}/results/", server.url), &gzip),
         ("GET /results/<uuid> (private)", format!("{}/results/{private}", server.url), &owner),
         ("GET /api/v1/leaderboard (JSON)", format!("{}/api/v1/leaderboard", server.url), &[]),
+        ("GET …/<uuid>/viewer (viewer doc)", format!("{}/api/v1/results/{private}/viewer", server.url), &owner),
     ];
     for (label, url, headers) in &pages {
         print_figures(label, &hammer(url, headers, connections, seconds).await);

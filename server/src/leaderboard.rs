@@ -142,11 +142,13 @@ pub struct BoardQuery {
 type BoardKey = (Option<String>, Option<String>);
 
 /// The published sets of one season with their runs and scene tags.
-struct SeasonData {
+pub struct SeasonData {
     /// The runner class its times come from.
-    runner_class: Option<String>,
-    sets: Vec<ResultSet>,
-    runs: Vec<StoredRun>,
+    pub runner_class: Option<String>,
+    /// Its published result sets.
+    pub sets: Vec<ResultSet>,
+    /// Their runs.
+    pub runs: Vec<StoredRun>,
     tags: BTreeMap<String, BTreeSet<String>>,
     /// Public boards already assembled, by (sort, tag).
     boards: Mutex<HashMap<BoardKey, Arc<Board>>>,
@@ -154,6 +156,32 @@ struct SeasonData {
     /// set's runs never change once stored, so a page is assembled once per
     /// version of the season's data.
     pages: Mutex<HashMap<(String, BoardKey), Arc<Board>>>,
+    /// Viewer documents (JSON) already made, by set id: made from this
+    /// version's data and the set's own stored rows, which never change.
+    documents: Mutex<HashMap<String, Arc<tokio::sync::OnceCell<axum::body::Bytes>>>>,
+}
+
+/// Viewer documents kept per season at most (each some hundreds of KB for
+/// a season of 20 techniques); when full the map is emptied.
+const MAX_CACHED_DOCUMENTS: usize = 64;
+
+impl SeasonData {
+    /// The viewer document of set `id` at this version: made by `make` if
+    /// no one has made it yet (the others wait for it); a failure is not kept.
+    pub async fn document<E, F, Fut>(&self, id: &str, make: F) -> Result<axum::body::Bytes, E>
+    where
+        F: FnOnce() -> Fut,
+        Fut: std::future::Future<Output = Result<Vec<u8>, E>>,
+    {
+        let cell = {
+            let mut documents = self.documents.lock().unwrap_or_else(|e| e.into_inner());
+            if documents.len() >= MAX_CACHED_DOCUMENTS && !documents.contains_key(id) {
+                documents.clear();
+            }
+            documents.entry(id.to_string()).or_default().clone()
+        };
+        Ok(cell.get_or_try_init(|| async { make().await.map(axum::body::Bytes::from) }).await?.clone())
+    }
 }
 
 /// Private pages' boards kept per season at most; when full the map is
@@ -207,7 +235,9 @@ impl BoardCache {
         self.version.read(pool).await
     }
 
-    async fn season(&self, pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
+    /// `season`'s published data at the current board version, read once
+    /// per version and shared (by the boards and the viewer's documents).
+    pub async fn season(&self, pool: &AnyPool, season: i64) -> Result<Arc<SeasonData>, sqlx::Error> {
         let version = self.version(pool).await?;
         let slot = match self.seasons.lock() {
             Ok(mut seasons) => seasons.slot(season, version),
@@ -229,6 +259,7 @@ async fn load_season(pool: &AnyPool, season: i64) -> Result<SeasonData, sqlx::Er
         tags,
         boards: Mutex::new(HashMap::new()),
         pages: Mutex::new(HashMap::new()),
+        documents: Mutex::new(HashMap::new()),
     })
 }
 

@@ -17,14 +17,35 @@ use sqlx::AnyPool;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// The viewer's document for `set` (which the caller may see).
-pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Result<ViewerData, ServiceError> {
+/// The viewer's document for `set` (which the caller may see), as JSON:
+/// made once per board version (the season's published sets and runs come
+/// from `boards`, and `set`'s own rows and files never change once stored).
+pub async fn document_json(
+    pool: &AnyPool,
+    boards: &crate::leaderboard::BoardCache,
+    data_dir: &Path,
+    set: &ResultSet,
+) -> Result<axum::body::Bytes, ServiceError> {
+    let season = boards.season(pool, set.season).await?;
+    season
+        .document(&set.id, || async {
+            let doc = document(pool, &season, data_dir, set).await?;
+            serde_json::to_vec(&doc).map_err(ServiceError::internal)
+        })
+        .await
+}
+
+/// The viewer's document for `set` beside `season`'s published sets.
+async fn document(
+    pool: &AnyPool,
+    season: &crate::leaderboard::SeasonData,
+    data_dir: &Path,
+    set: &ResultSet,
+) -> Result<ViewerData, ServiceError> {
     let mut sets = vec![set.clone()];
-    sets.extend(results::published(pool, set.season).await?.into_iter().filter(|s| s.id != set.id));
+    sets.extend(season.sets.iter().filter(|s| s.id != set.id).cloned());
     let mut runs = results::runs(pool, Selection::One(&set.id)).await?;
-    runs.extend(
-        results::runs(pool, Selection::Published(set.season)).await?.into_iter().filter(|r| r.result_id != set.id),
-    );
+    runs.extend(season.runs.iter().filter(|r| r.result_id != set.id).cloned());
     // Only runs scored against the references this set was scored against.
     let runs: Vec<StoredRun> =
         crate::leaderboard::one_reference_per_scene(&sets, &runs, Some(&set.id)).0.into_iter().cloned().collect();
@@ -62,7 +83,7 @@ pub async fn document(pool: &AnyPool, data_dir: &Path, set: &ResultSet) -> Resul
     let lower_is_better =
         |acronym: &str| doc.metrics.iter().find(|m| m.acronym == acronym).is_none_or(|m| m.lower_is_better);
     // Equal time and the costs compare only the runs of the season's runner class.
-    let class = results::season_class(pool, set.season).await?;
+    let class = season.runner_class.clone();
     let in_scenes: Vec<&StoredRun> = runs.iter().filter(|r| scenes.contains(&r.scene)).collect();
     let (timed, _) = crate::leaderboard::one_runner_class(&sets, &in_scenes, class.as_deref());
     let timed: BTreeSet<(&str, &str, i64)> =

@@ -116,9 +116,17 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
         submit(&server, user, project).await;
         sets.push(benchmark(&runner, t).await);
     }
-    for set in &sets[1..] {
+    // Ada's document is made once per board version: each publish shows in it at once.
+    let techniques_beside_ada = || async {
+        let doc = ada.browser.get(format!("{}/api/v1/results/{}/viewer", server.url, sets[0])).send().await.unwrap();
+        let doc: serde_json::Value = doc.json().await.unwrap();
+        doc["techniques"].as_array().unwrap().len()
+    };
+    assert_eq!(techniques_beside_ada().await, 1, "nothing published yet");
+    for (n, set) in sets[1..].iter().enumerate() {
         let published = bob.api(Method::POST, format!("{}/api/v1/results/{set}/publish", server.url)).send().await;
         assert_eq!(published.unwrap().status(), 200);
+        assert_eq!(techniques_beside_ada().await, n + 2, "after publishing {set}");
     }
     let adas = &sets[0];
 

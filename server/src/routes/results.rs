@@ -120,9 +120,10 @@ pub async fn viewer(
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     let set = results::visible(&state.pool, &id, user.as_ref()).await?;
-    let doc = crate::viewer::document(&state.pool, &state.config.data_dir, &set).await?;
+    let doc = crate::viewer::document_json(&state.pool, &state.boards, &state.config.data_dir, &set).await?;
     // Other techniques' sets change when they are published: never cached.
-    Ok(([(header::CACHE_CONTROL, "private, no-cache")], Json(doc)).into_response())
+    let headers = [(header::CACHE_CONTROL, "private, no-cache"), (header::CONTENT_TYPE, "application/json")];
+    Ok((headers, doc).into_response())
 }
 
 /// `GET /results/{id}/files/{*name}`: a file of a set the caller may see.
