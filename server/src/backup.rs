@@ -61,6 +61,9 @@ pub async fn backup(config: &Config, dir: &Path) -> anyhow::Result<()> {
         let pool = crate::db::connect(&url).await.context("the database")?;
         let target = dir.join(SQLITE_FILE).to_string_lossy().replace('\'', "''");
         sqlx::query(&format!("VACUUM INTO '{target}'")).execute(&pool).await.context("copying the database")?;
+        // Closed, not dropped: a dropped pool's maintenance task was seen
+        // spinning at exit, and the command never ended (once in many runs).
+        pool.close().await;
         "sqlite"
     };
     for name in KEPT {

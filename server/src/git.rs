@@ -228,8 +228,9 @@ pub struct Activity {
 pub const MAX_SERVED: usize = 16;
 
 /// At most this many requests of one caller are served at once; more are
-/// answered 429 at once rather than queued (a queued request holds a
-/// connection and its spooled body). A fetch or a push is two requests
+/// refused at once rather than queued (a queued request holds a
+/// connection and its spooled body): 401 for anonymous clients (asked to
+/// sign in, [`busy`]), 429 for others. A fetch or a push is two requests
 /// one after the other, so one at a time is all a client needs.
 pub const MAX_REQUESTS_PER_CALLER: usize = 4;
 
@@ -238,10 +239,14 @@ pub const MAX_REQUESTS_PER_CALLER: usize = 4;
 /// as long as their clients read.
 pub const MAX_READS: usize = 8;
 
-/// How long one client's request may be served: a clone of the largest
-/// checkout (512 MiB) at 1 MiB/s, and then some. Past it the answer is cut
-/// (at its next chunk: a client that stops reading is closed sooner, by
-/// the connection's idle limit).
+/// How long one client's request may take, from its first byte to the
+/// end of its answer: its body's upload, then a clone's answer (cut at its
+/// next chunk past the limit: a client that stops reading is closed
+/// sooner, by the connection's idle limit). A clone of most techniques'
+/// histories at 1 MiB/s fits well within it; a client slower than that, or
+/// a history larger, is cut. A push, once its body is on disk, is git's
+/// own work on a bounded pack and is not cut (killing `http-backend` would
+/// leave `receive-pack` and its hooks running).
 pub const SERVE_TIME_LIMIT: std::time::Duration = std::time::Duration::from_secs(15 * 60);
 
 /// The largest fetch request body: a fetch's negotiation (the objects it
@@ -600,7 +605,16 @@ impl GitHost {
         // negotiation (what it wants and has), which anyone may send for a public project.
         let cap =
             if is_push { self.max_push_bytes.saturating_mul(2).saturating_add(1 << 20) } else { FETCH_REQUEST_BYTES };
-        let body = match spool(body, &self.spool, cap).await {
+        let deadline = tokio::time::Instant::now() + SERVE_TIME_LIMIT;
+        let spooled = tokio::time::timeout_at(deadline, spool(body, &self.spool, cap)).await;
+        let Ok(spooled) = spooled else {
+            let minutes = SERVE_TIME_LIMIT.as_secs() / 60;
+            return plain(
+                StatusCode::REQUEST_TIMEOUT,
+                format!("the request took longer than {minutes} minutes to send\n"),
+            );
+        };
+        let body = match spooled {
             Ok(spooled) => spooled,
             Err(Spool::TooLarge) if is_push => {
                 return plain(
@@ -654,7 +668,6 @@ impl GitHost {
             return plain(StatusCode::SERVICE_UNAVAILABLE, "the server is shutting down\n".into());
         };
         self.counts.served.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let deadline = tokio::time::Instant::now() + SERVE_TIME_LIMIT;
         let mut child = match command.spawn() {
             Ok(c) => c,
             Err(e) => return plain(StatusCode::INTERNAL_SERVER_ERROR, format!("cannot run git http-backend: {e}\n")),
@@ -728,22 +741,8 @@ impl GitHost {
         // Pushes answer little; wait for the hooks to finish so the record is complete.
         // Its report-status is a few lines per ref; the cap only guards memory.
         let mut output = Vec::new();
-        let finished = tokio::time::timeout_at(deadline, async {
-            let _ = (&mut reader).take(16 << 20).read_to_end(&mut output).await;
-            child.wait().await
-        })
-        .await;
-        let exit = match finished {
-            Ok(exit) => exit,
-            Err(_) => {
-                let _ = child.kill().await;
-                tracing::warn!("a push to {project_id} ran past {} s and was stopped", SERVE_TIME_LIMIT.as_secs());
-                return plain(
-                    StatusCode::GATEWAY_TIMEOUT,
-                    format!("the push took longer than {} minutes and was stopped\n", SERVE_TIME_LIMIT.as_secs() / 60),
-                );
-            }
-        };
+        let _ = (&mut reader).take(16 << 20).read_to_end(&mut output).await;
+        let exit = child.wait().await;
         drop((permit, slot));
         let errors = stderr_task.await.unwrap_or_default();
         if !errors.trim().is_empty() {

@@ -191,8 +191,9 @@ const MAX_INFO_BYTES: usize = 64 * 1024;
 pub struct CheckedCommits(std::sync::Arc<std::sync::Mutex<std::collections::HashMap<(String, String), TechniqueInfo>>>);
 
 impl CheckedCommits {
-    /// Descriptions kept at most (each a few hundred bytes).
-    pub const KEPT: usize = 1024;
+    /// Descriptions kept at most: each is an info.json of at most 64 KiB
+    /// (usually a few hundred bytes), so at most 16 MiB.
+    pub const KEPT: usize = 256;
 
     fn get(&self, project_id: &str, commit: &str) -> Option<TechniqueInfo> {
         let kept = self.0.lock().unwrap_or_else(|e| e.into_inner());
@@ -300,20 +301,24 @@ pub async fn start(
                 return Err(e);
             }
             let not = if kind == JobKind::Build { "not built" } else { "not run" };
-            // Each push makes a row, and pushes are cheap: past a day's
-            // most, a refusal is told to the pusher and not kept.
-            if refusals_today(state, &user.id).await? >= REFUSALS_KEPT_PER_DAY {
-                return Err(ServiceError::too_many(
-                    "refusal_not_kept",
-                    format!(
-                        "{not}: {} (this refusal is not kept in the project's history: \
-                         it holds the last {REFUSALS_KEPT_PER_DAY} of a day)",
-                        e.message
-                    ),
-                ));
-            }
             cancelled = Some(format!("{not}: {}", e.message));
         }
+    }
+    // Each push refused (over a quota, or a broken commit) makes a row and
+    // a mail, and pushes of empty commits are cheap: past a day's most,
+    // the refusal is told to the pusher and nothing is written or sent.
+    if source == Source::Push
+        && (failure.is_some() || cancelled.is_some())
+        && refusals_today(state, &user.id).await? >= REFUSALS_KEPT_PER_DAY
+    {
+        let why = failure.as_ref().map(|(_, problem)| problem).or(cancelled.as_ref()).cloned().unwrap_or_default();
+        return Err(ServiceError::too_many(
+            "refusal_not_kept",
+            format!(
+                "{why} (not kept in the project's history, and not mailed: \
+                 {REFUSALS_KEPT_PER_DAY} refused pipelines a day are)"
+            ),
+        ));
     }
 
     let (job_state, finished) = match (&failure, &cancelled, kind) {
@@ -458,15 +463,17 @@ pub fn describe(state: &AppState, job: &crate::jobs::Job, branch: &str) -> Strin
     }
 }
 
-/// Pipelines refused over a quota that are kept as cancelled jobs, per user
-/// and 24 hours (the pusher is told of every refusal).
+/// Pushed pipelines refused at once (over a quota, or a broken commit)
+/// that are kept as jobs (and mailed), per user and 24 hours; the pusher
+/// is told of every refusal.
 pub const REFUSALS_KEPT_PER_DAY: i64 = 20;
 
-/// The user's jobs cancelled before they started in the last 24 hours.
+/// The user's jobs of the last 24 hours that ended before they started:
+/// refused, or cancelled while queued.
 async fn refusals_today(state: &AppState, user_id: &str) -> Result<i64, sqlx::Error> {
     sqlx::query_scalar(
-        "SELECT COUNT(*) FROM jobs WHERE user_id = $1 AND state = 'cancelled' AND started_at IS NULL \
-         AND created_at > $2",
+        "SELECT COUNT(*) FROM jobs WHERE user_id = $1 AND state IN ('cancelled', 'failed') \
+         AND started_at IS NULL AND created_at > $2",
     )
     .bind(user_id)
     .bind(now_ms() - 24 * 3600 * 1000)

@@ -18,8 +18,11 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 /// The viewer's document for `set` (which the caller may see), as JSON:
-/// made once per board version (the season's published sets and runs come
-/// from `boards`, and `set`'s own rows and files never change once stored).
+/// made once per board version. The season's published sets and runs come
+/// from `boards`; `set`'s own rows never change, and its files and
+/// references are in place once it is stored (a shared reference file that
+/// appears only later, for a set stored before references were kept,
+/// shows from the next board version).
 pub async fn document_json(
     pool: &AnyPool,
     boards: &crate::leaderboard::BoardCache,

@@ -238,9 +238,10 @@ on_both_databases!(quotas_bound_queued_jobs_and_daily_runs, |db: Db| async move 
     assert_eq!((status, body["error"].as_str()), (429, Some("quota_runs")), "{body}");
 });
 
-/// Each push over a quota was kept as a cancelled job, and pushes of empty
-/// commits are cheap: a loop of them filled the jobs table without end.
-/// Now a day keeps 20 refusals per user; later ones are told, not kept.
+/// Each push over a quota was kept as a cancelled job (and each broken
+/// commit as a failed one, mailed), and pushes of empty commits are cheap:
+/// a loop of them filled the jobs table and the outbox without end. Now a
+/// day keeps 20 refusals per user; later ones are told, not kept.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn refusals_over_a_quota_are_kept_only_so_many_a_day() {
     let server = spawn_with(Db::Sqlite, |c| c.max_queued_jobs_per_user = 1).await;
@@ -256,6 +257,13 @@ async fn refusals_over_a_quota_are_kept_only_so_many_a_day() {
         assert!(pushed && output.contains("not run: you have 1 jobs queued"), "push {n}: {output}");
         assert_eq!(output.contains("not kept"), n >= kept, "push {n}: {output}");
     }
+    // A broken commit past the day's most: told, neither kept nor mailed.
+    let mails = server.mails_to("ada@example.org").len();
+    std::fs::remove_file(repo.path().join("info.json")).unwrap();
+    common::commit_all(repo.path(), "broken");
+    let (pushed, output) = push(repo.path(), &url, &[]);
+    assert!(pushed && output.contains("no info.json") && output.contains("not kept"), "{output}");
+    assert_eq!(server.mails_to("ada@example.org").len(), mails, "no mail past the day's most");
     let jobs = jobs_of(&server, &ada, "pushy").await;
     let cancelled = jobs.iter().filter(|j| j["state"] == "cancelled").count();
     assert_eq!((jobs.len(), cancelled), (1 + kept, kept), "the queued run and {kept} refusals");

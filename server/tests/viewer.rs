@@ -363,7 +363,7 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
         refused,
         serde_json::json!([
             "x.fbpx: longer than its header says",
-            "x.fbpx: its header says 30000000000 values, more than the viewer opens (67108864)"
+            "x.fbpx: its header says 30000000000 values, more than the viewer opens (201326592)"
         ])
     );
 

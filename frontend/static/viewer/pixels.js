@@ -17,9 +17,14 @@
   const cache = new Map();
   const cachedBytes = new Map(); // address → bytes, once loaded
   const MAX_CACHED_BYTES = 768 * 1024 * 1024;
-  // The most values one pixel file may hold (4096² RGB is 50 M): its
-  // header says how many before they are decompressed.
-  const MAX_VALUES = 64 * 1024 * 1024;
+  // The most values one pixel file may hold, as the SDK writes them
+  // (sdk/exchange/src/pixels.rs, MAX_FLOATS): its header says how many
+  // before the values are decompressed.
+  const MAX_VALUES = 3 * 2 ** 26;
+  // The gzip is fed to the decompressor this many bytes at a time: a
+  // decompressor inflates each input chunk whole before the reader sees
+  // any of it, and deflate inflates up to about 1000×.
+  const SLICE = 16 * 1024;
   const pendingScripts = new Map(); // address → resolve(bytes)
 
   window.fbksdPixels = function (address, base64) {
@@ -56,7 +61,20 @@
   // uploaded by a runner could be a few kilobytes that decompress to
   // gigabytes, and the tab would hold them all before the size was checked.
   async function gunzip(buffer, address) {
-    const reader = new Blob([buffer]).stream().pipeThrough(new DecompressionStream("gzip")).getReader();
+    const input = new Uint8Array(buffer);
+    let offset = 0;
+    const slices = new ReadableStream(
+      {
+        pull(controller) {
+          if (offset >= input.length) return controller.close();
+          controller.enqueue(input.slice(offset, offset + SLICE));
+          offset += SLICE;
+        },
+      },
+      { highWaterMark: 0 }
+    );
+    const reader = slices.pipeThrough(new DecompressionStream("gzip")).getReader();
+    const stop = () => reader.cancel().catch(() => {});
     const header = new Uint8Array(20);
     let raw = null, filled = 0;
     for (;;) {
@@ -72,21 +90,21 @@
         const view = new DataView(header.buffer);
         const n = view.getUint32(8, true) * view.getUint32(12, true) * view.getUint32(16, true);
         if (n > MAX_VALUES) {
-          reader.cancel();
+          stop();
           throw new Error(address + ": its header says " + n + " values, more than the viewer opens (" + MAX_VALUES + ")");
         }
         raw = new Uint8Array(20 + 4 * n);
         raw.set(header);
       }
       if (filled + chunk.length > raw.length) {
-        reader.cancel();
+        stop();
         throw new Error(address + ": longer than its header says");
       }
       raw.set(chunk, filled);
       filled += chunk.length;
     }
     if (!raw) throw new Error(address + ": not an FBKSD pixel file");
-    return raw.buffer.slice(0, filled);
+    return filled === raw.length ? raw.buffer : raw.buffer.slice(0, filled);
   }
 
   // Parses a pixel file as it was stored (gzip), bounded by its header.
