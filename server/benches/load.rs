@@ -215,26 +215,15 @@ async fn main() {
         assert_eq!(response.status(), 200, "live log {i}");
         streams.push(response);
     }
-    let flooding = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
-    let flood: Vec<_> = (0..8)
-        .map(|task| {
-            let (url, flooding) = (server.url.clone(), flooding.clone());
-            tokio::spawn(async move {
-                let client = reqwest::Client::new();
-                let mut answers = std::collections::BTreeMap::<u16, usize>::new();
-                let mut n = 0usize;
-                while flooding.load(std::sync::atomic::Ordering::Relaxed) {
-                    n += 1;
-                    let body =
-                        json!({ "email": format!("victim-{task}-{n}@example.org"), "password": "not the password" });
-                    if let Ok(r) = client.post(format!("{url}/api/v1/sessions")).json(&body).send().await {
-                        *answers.entry(r.status().as_u16()).or_default() += 1;
-                    }
-                }
-                answers
-            })
-        })
-        .collect();
+    let url = server.url.clone();
+    let (going, flood) = keep_attacking(8, move |client, task, n| {
+        let url = url.clone();
+        async move {
+            let body = json!({ "email": format!("victim-{task}-{n}@example.org"), "password": "not the password" });
+            let answer = client.post(format!("{url}/api/v1/sessions")).json(&body).send().await;
+            answer.ok().map(|r| r.status().as_u16())
+        }
+    });
     println!("under a log-in flood (8 connections) and 20 live job logs:");
     let job_page: (&str, String, &Headers) =
         ("GET /jobs/<id> (job page)", format!("{}/jobs/{}", server.url, running.id), &[]);
@@ -242,44 +231,32 @@ async fn main() {
     for (label, url, headers) in [&pages[0], &pages[2], &job_page] {
         print_figures(label, &hammer(url, headers, connections, seconds).await);
     }
-    flooding.store(false, std::sync::atomic::Ordering::Relaxed);
-    let mut answers = std::collections::BTreeMap::<u16, usize>::new();
-    for task in flood {
-        for (status, n) in task.await.unwrap() {
-            *answers.entry(status).or_default() += n;
-        }
-    }
+    let answers = stop(going, flood).await;
     println!("log-in flood answers (HTTP status: count): {answers:?}");
     drop(streams);
 
     under_git_and_metrics_attack(&server, &ada, &pages, connections, seconds).await;
 }
 
-/// The process's peak resident memory so far, in MiB (`VmHWM`: the server
-/// and the bench's own clients, which share the process).
-fn peak_mib() -> u64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap();
-    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
-    line.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap() >> 10
-}
-
-/// Tasks that repeat `attack` until told to stop; each returns its
-/// answers' statuses, counted.
+/// Tasks that repeat `attack(client, task, n)` until told to stop, each
+/// with a client of its own (one keep-alive connection); each returns its
+/// answers' statuses, counted (a request that got no answer is not).
 fn keep_attacking<F, Fut>(tasks: usize, attack: F) -> (Arc<AtomicBool>, Vec<tokio::task::JoinHandle<Counts>>)
 where
-    F: Fn(usize, usize) -> Fut + Clone + Send + 'static,
-    Fut: std::future::Future<Output = u16> + Send,
+    F: Fn(reqwest::Client, usize, usize) -> Fut + Clone + Send + 'static,
+    Fut: std::future::Future<Output = Option<u16>> + Send,
 {
     let going = Arc::new(AtomicBool::new(true));
     let handles = (0..tasks)
         .map(|task| {
             let (going, attack) = (going.clone(), attack.clone());
             tokio::spawn(async move {
-                let mut counts = Counts::new();
-                let mut n = 0;
+                let (client, mut counts, mut n) = (reqwest::Client::new(), Counts::new(), 0);
                 while going.load(Ordering::Relaxed) {
                     n += 1;
-                    *counts.entry(attack(task, n).await).or_default() += 1;
+                    if let Some(status) = attack(client.clone(), task, n).await {
+                        *counts.entry(status).or_default() += 1;
+                    }
                 }
                 counts
             })
@@ -323,7 +300,7 @@ async fn under_git_and_metrics_attack(
     let series = |text: &str| text.lines().filter(|l| !l.starts_with('#') && !l.contains("_bucket{")).count();
     let metrics = format!("{}/metrics", server.url);
     let series_before = series(&reqwest::get(&metrics).await.unwrap().text().await.unwrap());
-    let peak_before = peak_mib();
+    let peak_before = common::peak_memory() >> 20;
 
     let (mut clones, mut held) = (Counts::new(), Vec::new());
     for _ in 0..16 {
@@ -332,19 +309,19 @@ async fn under_git_and_metrics_attack(
         held.push(stream);
     }
     let url = server.url.clone();
-    let (oversized, oversizing) = keep_attacking(10, move |_, _| {
+    let (oversized, oversizing) = keep_attacking(10, move |_, _, _| {
         let url = url.clone();
         async move {
             let headers = "Content-Type: application/x-git-upload-pack-request\r\n";
-            common::send_zeros(&url, "POST", "/git/big.git/git-upload-pack", 64 << 20, headers).await
+            Some(common::send_zeros(&url, "POST", "/git/big.git/git-upload-pack", 64 << 20, headers).await)
         }
     });
     let url = metrics.clone();
-    let (flood, flooding) = keep_attacking(4, move |task, n| {
+    let (flood, flooding) = keep_attacking(4, move |_, task, n| {
         let url = url.clone();
         async move {
             let method = Method::from_bytes(format!("FLOOD{task}X{n}").as_bytes()).unwrap();
-            reqwest::Client::new().request(method, &url).send().await.map_or(0, |r| r.status().as_u16())
+            Some(reqwest::Client::new().request(method, &url).send().await.map_or(0, |r| r.status().as_u16()))
         }
     });
 
@@ -373,7 +350,10 @@ async fn under_git_and_metrics_attack(
     println!("oversized fetch requests' answers: {oversized:?}");
     println!("metrics flood answers: {flood:?}; /metrics series {series_before} before, {series_after} after");
     println!("the owner's push under attack: landed in {:.2} s", took.as_secs_f64());
-    println!("peak memory of the process (server and clients): {peak_before} MiB before, {} MiB after", peak_mib());
+    println!(
+        "peak memory of the process (server and clients): {peak_before} MiB before, {} MiB after",
+        (common::peak_memory() >> 20)
+    );
 }
 
 fn print_figures(label: &str, f: &Figures) {

@@ -180,6 +180,9 @@ pub struct GitRequest<'a> {
 /// The caller that all anonymous clients are together.
 pub const ANONYMOUS: &str = "anonymous";
 
+/// The `WWW-Authenticate` challenge of a git request that must sign in.
+pub const ASK_CREDENTIALS: &str = "Basic realm=\"FBKSD\", charset=\"UTF-8\"";
+
 /// The server's repositories.
 #[derive(Debug, Clone)]
 pub struct GitHost {
@@ -775,7 +778,7 @@ fn busy(caller: &str) -> Response {
             "the server is serving as many anonymous git requests as it does at once ({MAX_REQUESTS_PER_CALLER}): \
              sign in (any user name, a personal access token as the password) or try again in a minute\n"
         );
-        let headers = [(WWW_AUTHENTICATE, "Basic realm=\"FBKSD\", charset=\"UTF-8\""), (RETRY_AFTER, "60")];
+        let headers = [(WWW_AUTHENTICATE, ASK_CREDENTIALS), (RETRY_AFTER, "60")];
         return (StatusCode::UNAUTHORIZED, headers, text).into_response();
     }
     let text = format!(

@@ -62,11 +62,6 @@ impl Slots {
     pub fn taken(&self) -> usize {
         self.0.lock().map_or(0, |c| c.total)
     }
-
-    /// The most one caller may hold.
-    pub fn max_per_caller(&self) -> usize {
-        self.0.lock().map_or(0, |c| c.max_per_caller)
-    }
 }
 
 impl Drop for Slot {

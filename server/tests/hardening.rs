@@ -316,13 +316,6 @@ async fn the_data_directory_is_the_owners_alone() {
     check();
 }
 
-/// The process's peak resident memory so far, in bytes (`VmHWM`).
-fn peak_memory() -> u64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap();
-    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
-    line.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap() << 10
-}
-
 /// Request bodies are streamed to disk, never held whole: before, each git
 /// request was read into memory up to 2 × `max_push_bytes` + 1 MiB (also
 /// anonymous fetches of a public project, before any git slot was asked
@@ -343,7 +336,7 @@ async fn request_bodies_are_streamed_not_held() {
     assert!(pushed, "{output}");
     let runner = FakeRunner::register(&server, "runner").await;
     let job = runner.claim(5).await.expect("the benchmark job");
-    let before = peak_memory();
+    let before = common::peak_memory();
 
     // Push requests of 60 MiB each, at once: git answers them, none is held.
     let git = "/git/box-filter-cpp.git";
@@ -355,7 +348,7 @@ async fn request_bodies_are_streamed_not_held() {
     let pushes = (0..4).map(|_| common::send_zeros(&server.url, "POST", &receive_pack, 60 * MIB, &push_headers));
     let answers = futures_util::future::join_all(pushes).await;
     assert!(answers.iter().all(|s| *s != 413 && *s != 401), "within the cap: {answers:?}");
-    let after_pushes = peak_memory();
+    let after_pushes = common::peak_memory();
     assert!(
         after_pushes - before < 16 * MIB,
         "4 pushes of 60 MiB raised the peak by {} MiB",
@@ -378,7 +371,7 @@ async fn request_bodies_are_streamed_not_held() {
     assert_eq!(common::send_zeros(&server.url, "PUT", &file, 150 * MIB, &auth).await, 204);
     let staged = server.config().data_dir.join("uploads").join(&job.id).join("sin-bands");
     assert_eq!(std::fs::metadata(staged.join("big.exr")).unwrap().len(), 150 * MIB);
-    let after_upload = peak_memory();
+    let after_upload = common::peak_memory();
     assert!(
         after_upload - before < 16 * MIB,
         "a 150 MiB upload raised the peak by {} MiB",
@@ -492,9 +485,7 @@ async fn git_off_thread(dir: &std::path::Path, args: &[&str]) -> (bool, String) 
 /// One series of the server's `/metrics`.
 async fn metric(server: &TestServer, series: &str) -> f64 {
     let text = reqwest::get(format!("{}/metrics", server.url)).await.unwrap().text().await.unwrap();
-    text.lines()
-        .find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.trim().parse().ok())
-        .unwrap_or_else(|| panic!("no {series} in {text}"))
+    common::sample(&text, series).unwrap_or_else(|| panic!("no {series} in {text}"))
 }
 
 /// Clones last as long as their clients read, and a git process serves

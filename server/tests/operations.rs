@@ -12,11 +12,6 @@ async fn get(server: &TestServer, path: &str) -> (u16, String) {
     (response.status().as_u16(), response.text().await.unwrap())
 }
 
-/// The value of the sample `name{labels}` in a scrape.
-fn sample(metrics: &str, series: &str) -> Option<f64> {
-    metrics.lines().find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.trim().parse().ok())
-}
-
 on_both_databases!(health_readiness_and_metrics_follow_the_service, |db: Db| async move {
     let server = spawn(db).await;
     assert_eq!(get(&server, "/healthz").await, (200, "ok\n".into()));
@@ -28,29 +23,29 @@ on_both_databases!(health_readiness_and_metrics_follow_the_service, |db: Db| asy
     assert!(push(repo.path(), &server.clone_url("box", &ada.token), &[]).0);
     let (status, metrics) = get(&server, "/metrics").await;
     assert_eq!(status, 200);
-    assert_eq!(sample(&metrics, "fbksd_jobs_queued{kind=\"build\"}"), Some(1.0), "{metrics}");
-    assert_eq!(sample(&metrics, "fbksd_runners{health=\"healthy\"}"), Some(0.0), "{metrics}");
+    assert_eq!(common::sample(&metrics, "fbksd_jobs_queued{kind=\"build\"}"), Some(1.0), "{metrics}");
+    assert_eq!(common::sample(&metrics, "fbksd_runners{health=\"healthy\"}"), Some(0.0), "{metrics}");
 
     let runner = FakeRunner::register(&server, "runner-1").await;
     let job = runner.claim(5).await.expect("the build");
     let metrics = get(&server, "/metrics").await.1;
-    assert_eq!(sample(&metrics, "fbksd_jobs_queued{kind=\"build\"}"), Some(0.0), "{metrics}");
-    assert_eq!(sample(&metrics, "fbksd_jobs_running{kind=\"build\"}"), Some(1.0), "{metrics}");
-    assert_eq!(sample(&metrics, "fbksd_runners{health=\"healthy\"}"), Some(1.0), "{metrics}");
+    assert_eq!(common::sample(&metrics, "fbksd_jobs_queued{kind=\"build\"}"), Some(0.0), "{metrics}");
+    assert_eq!(common::sample(&metrics, "fbksd_jobs_running{kind=\"build\"}"), Some(1.0), "{metrics}");
+    assert_eq!(common::sample(&metrics, "fbksd_runners{health=\"healthy\"}"), Some(1.0), "{metrics}");
 
     let (status, _) = job.finish(&runner, json!({ "state": "failed", "reason": "crashed", "message": "x" })).await;
     assert_eq!(status, 200);
     let metrics = get(&server, "/metrics").await.1;
-    assert_eq!(sample(&metrics, "fbksd_job_failures_total{reason=\"crashed\"}"), Some(1.0), "{metrics}");
+    assert_eq!(common::sample(&metrics, "fbksd_job_failures_total{reason=\"crashed\"}"), Some(1.0), "{metrics}");
     assert_eq!(
-        sample(&metrics, "fbksd_job_duration_seconds_count{kind=\"build\",state=\"failed\"}"),
+        common::sample(&metrics, "fbksd_job_duration_seconds_count{kind=\"build\",state=\"failed\"}"),
         Some(1.0),
         "{metrics}"
     );
     // Answers are timed by route pattern, never by raw path.
     let series =
         "fbksd_http_request_duration_seconds_count{method=\"POST\",route=\"/api/v1/jobs/{id}/finish\",status=\"200\"}";
-    assert_eq!(sample(&metrics, series), Some(1.0), "{metrics}");
+    assert_eq!(common::sample(&metrics, series), Some(1.0), "{metrics}");
     assert!(!metrics.contains(&job.id), "no series per job");
 
     // A data directory that takes no file: not ready, and says why.

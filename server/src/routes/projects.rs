@@ -313,11 +313,7 @@ async fn git_caller(state: &AppState, headers: &HeaderMap) -> Result<GitCaller, 
 }
 
 fn ask_credentials(message: &str) -> Response {
-    (
-        StatusCode::UNAUTHORIZED,
-        [(header::WWW_AUTHENTICATE, "Basic realm=\"FBKSD\", charset=\"UTF-8\"")],
-        format!("{message}\n"),
-    )
+    (StatusCode::UNAUTHORIZED, [(header::WWW_AUTHENTICATE, crate::git::ASK_CREDENTIALS)], format!("{message}\n"))
         .into_response()
 }
 

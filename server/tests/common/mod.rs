@@ -768,3 +768,16 @@ pub fn repository_too_big_to_buffer() -> tempfile::TempDir {
     commit_all(repo.path(), "weights");
     repo
 }
+
+/// The value of the sample `name{labels}` in a scrape.
+pub fn sample(metrics: &str, series: &str) -> Option<f64> {
+    metrics.lines().find_map(|l| l.strip_prefix(series)?.strip_prefix(' ')?.trim().parse().ok())
+}
+
+/// The process's peak resident memory so far, in bytes (`VmHWM`): the
+/// server's and the test's together (nextest runs each test in its own process).
+pub fn peak_memory() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap() << 10
+}
