@@ -2,12 +2,14 @@
 //! the runner class its times are compared within.
 //!
 //! A class is what decides how much CPU time a technique's work costs: the
-//! CPU model, its vector ISA level, the cores a run may use and the
-//! memory. Two runners of one class give one technique the same cost
-//! within the noise; runners of different classes are not compared. A CPU
-//! quota is recorded but is not part of the class: it delays a container,
-//! it does not change the CPU time its work takes (measured with
-//! `deploy/bench-runner-classes.sh`, see ci-runner/README.md).
+//! CPU model, its vector ISA level, the cores a run may use, the memory
+//! and the CPU quota of its containers, if any. Two runners of one class
+//! give one technique the same cost within the noise; runners of different
+//! classes are not compared. The quota is part of the class because it
+//! moves costs without moving the calibration: under half a core the
+//! costs rose by a median 10–13 % while the calibration moved by 2 %
+//! (`deploy/bench-runner-classes.sh`, see ci-runner/README.md), so the
+//! server's drift check could not tell a quota'd runner from its class.
 
 use crate::calibration::Calibration;
 use serde::Serialize;
@@ -62,7 +64,7 @@ impl Machine {
         let cpuset = cpuset.map_or_else(|| format!("0-{}", machine_cores - 1), str::to_string);
         let cores = count_cpus(&cpuset).unwrap_or(machine_cores);
         Machine {
-            class: class(&cpu_model, &isa, cores, memory_gib),
+            class: class(&cpu_model, &isa, cores, memory_gib, cpu_quota),
             cpu_model,
             isa,
             cores,
@@ -83,10 +85,12 @@ impl Machine {
     }
 }
 
-/// The class's one-line name.
-pub fn class(cpu_model: &str, isa: &str, cores: usize, memory_gib: u64) -> String {
+/// The class's one-line name (`… · 2 cores · 24 GiB`, then
+/// `· quota 0.5 cores` under a quota).
+pub fn class(cpu_model: &str, isa: &str, cores: usize, memory_gib: u64, cpu_quota: Option<f64>) -> String {
     let cores = if cores == 1 { "1 core".to_string() } else { format!("{cores} cores") };
-    format!("{cpu_model} · {isa} · {cores} · {memory_gib} GiB")
+    let quota = cpu_quota.map_or_else(String::new, |q| format!(" · quota {q} cores"));
+    format!("{cpu_model} · {isa} · {cores} · {memory_gib} GiB{quota}")
 }
 
 /// The x86-64 level (`x86-64-v1` … `v4`) that `flags` (/proc/cpuinfo) reach
@@ -172,10 +176,11 @@ mod tests {
         let machine = super::Machine::probe(Some("0"), Some(0.5));
         assert_eq!(machine.cores, 1);
         assert!(machine.memory_gib > 0, "{machine:?}");
-        assert_eq!(machine.class, super::class(&machine.cpu_model, &machine.isa, 1, machine.memory_gib));
+        assert_eq!(machine.class, super::class(&machine.cpu_model, &machine.isa, 1, machine.memory_gib, Some(0.5)));
         assert!(machine.class.contains(" · 1 core · "), "{}", machine.class);
-        // The quota is recorded, not part of the class.
-        assert_eq!(machine.class, super::Machine::probe(Some("0"), None).class);
+        // A quota makes another class: its costs differ from the unquota'd runner's.
+        let unquotad = super::Machine::probe(Some("0"), None).class;
+        assert_eq!(machine.class, format!("{unquotad} · quota 0.5 cores"));
         assert_eq!(machine.cpu_quota, Some(0.5));
     }
 

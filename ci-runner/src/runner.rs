@@ -181,7 +181,18 @@ impl Runner {
                         () = self.handle(&claim) => {}
                     }
                 }
-                Ok(None) => {}
+                Ok(None) => {
+                    // Idle: calibrate now and then, so that a runner held
+                    // back for a drifted calibration takes benchmarks again
+                    // once it is back (the server decides, from the record).
+                    let measured_at = self.ctx.calibration.lock().map_or(0, |c| c.measured_at);
+                    if crate::calibration::age_seconds(measured_at) >= IDLE_CALIBRATION_SECONDS {
+                        tokio::select! {
+                            _ = &mut shutdown => break,
+                            () = self.recalibrate() => {}
+                        }
+                    }
+                }
                 Err(e) => {
                     tracing::error!("claiming a job: {e}");
                     tokio::select! {
@@ -220,12 +231,27 @@ impl Runner {
         }
         remove_job_dir(&ctx.sandbox, &ctx.images, &dir).await;
         // Between jobs, so the next result says how fast this runner is now.
+        self.recalibrate().await;
+    }
+
+    /// Measures the calibration again, keeps it for the next result, and
+    /// tells the server, which holds the runner back from its season's
+    /// benchmarks while it lies too far from its class's.
+    async fn recalibrate(&self) {
+        let ctx = &self.ctx;
         let calibration = calibrate(&ctx.machine).await;
+        let record = ctx.machine.record(&calibration);
         if let Ok(mut kept) = ctx.calibration.lock() {
             *kept = calibration;
         }
+        if let Err(e) = ctx.api.ready(&self.credentials.token, &record).await {
+            tracing::warn!("could not report the new calibration: {e}");
+        }
     }
 }
+
+/// How often an idle runner calibrates again, in seconds.
+const IDLE_CALIBRATION_SECONDS: i64 = 180;
 
 /// Times the calibration workload off the async threads, on the cores the
 /// jobs run on.

@@ -168,25 +168,33 @@ pub struct Claimed {
 /// user's job is queued; then the user with the fewest jobs running goes
 /// first, and among those the one whose last job started longest ago
 /// (round robin), so one user's hundred queued jobs do not hold back
-/// another's one; a user's own jobs go oldest first.
+/// another's one; a user's own jobs go oldest first. `held_season`: a
+/// season whose benchmarks this runner is not handed now (its calibration
+/// has drifted from its class's, [`crate::leaderboard::SeasonData::drift_of`]).
 pub async fn claim(
     pool: &AnyPool,
     postgres: bool,
     runner_id: &str,
     lease_ms: i64,
     runner_class: Option<&str>,
+    held_season: Option<i64>,
 ) -> Result<Option<Claimed>, sqlx::Error> {
     // A season's benchmarks go to runners of the class its times come from
     // (a runner that names none gets them only while the season names none).
-    let pick = "SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
+    // The held season is a number, never text from a client.
+    let pick = format!(
+        "SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
          WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark') \
          AND (j.kind = 'build' OR NOT EXISTS (SELECT 1 FROM seasons s WHERE s.number = j.season \
               AND s.runner_class IS NOT NULL AND s.runner_class <> $5)) \
+         AND (j.kind = 'build' OR j.season <> {}) \
          ORDER BY u.is_service, \
          (SELECT COUNT(*) FROM jobs r WHERE r.user_id = j.user_id AND r.state = 'running'), \
          (SELECT COALESCE(MAX(r.started_at), 0) FROM jobs r WHERE r.user_id = j.user_id), \
-         j.created_at, j.id LIMIT 1";
-    claim_picked(pool, postgres, runner_id, lease_ms, pick, &[runner_class.unwrap_or_default().to_string()]).await
+         j.created_at, j.id LIMIT 1",
+        held_season.unwrap_or(-1)
+    );
+    claim_picked(pool, postgres, runner_id, lease_ms, &pick, &[runner_class.unwrap_or_default().to_string()]).await
 }
 
 /// Hands the oldest queued reference job of one of `keys` (the scenes the

@@ -248,6 +248,27 @@ impl BoardCache {
     }
 }
 
+impl SeasonData {
+    /// How far a runner's latest calibration (in `machine`, its record)
+    /// lies from its class's in this season, when beyond
+    /// [`CALIBRATION_DRIFT_LIMIT`]: its times would not compare with the
+    /// board's, so it is not handed the season's benchmarks meanwhile
+    /// ([`crate::jobs::claim`]). `None` within it, for a runner of another
+    /// class, and while no published set of the class has a calibration.
+    pub fn drift_of(&self, machine: &serde_json::Value) -> Option<Drift> {
+        let class = self.runner_class.as_deref()?;
+        if crate::results::runner_class(machine) != Some(class) {
+            return None;
+        }
+        let of_class: Vec<&ResultSet> = self
+            .sets
+            .iter()
+            .filter(|s| crate::results::runner_class(&s.provenance["machine"]) == Some(class))
+            .collect();
+        drift_from(&class_calibrations(&of_class), machine)
+    }
+}
+
 async fn load_season(pool: &AnyPool, season: i64) -> Result<SeasonData, sqlx::Error> {
     use crate::results::Selection;
     let mut tags = BTreeMap::new();
@@ -366,33 +387,148 @@ pub fn one_reference_per_scene<'a>(
     (kept, notes)
 }
 
+/// How far a result set's calibration (its runner's CPU time for the
+/// calibration workload, measured before the job) may lie from its class's
+/// before its times are left out of equal time: 10 %. One runner's
+/// calibrations lay within 2.3 % of their median idle and within 5 % with
+/// both cores' memory bandwidth taken by other processes (ci-runner/README.md,
+/// "Calibration drift"), so a set beyond this was measured on a machine
+/// that had become another one (a capped clock, a busy sibling
+/// hyper-thread), and its costs would move its ranks by the machine, not
+/// by its work. A tighter limit would hold runners back on noise.
+pub const CALIBRATION_DRIFT_LIMIT: f64 = 0.10;
+
+/// Why equal time leaves a result set out.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Untimed {
+    /// Measured on another runner class than the season's.
+    OtherClass,
+    /// Measured while its runner's calibration was off its class's.
+    Drifted(Drift),
+}
+
+impl Untimed {
+    /// In a few words, for the viewer's labels.
+    pub fn reason(&self) -> String {
+        match self {
+            Untimed::OtherClass => "another runner class".to_string(),
+            Untimed::Drifted(d) => format!("its runner's calibration {:+.0} % from its class's", 100.0 * d.ratio()),
+        }
+    }
+}
+
+/// The sets of `sets` that equal time leaves out when the season's times
+/// come from `class` (none while it names none), by set id.
+pub fn untimed_sets<'a>(sets: &'a [ResultSet], class: Option<&str>) -> BTreeMap<&'a str, Untimed> {
+    let Some(class) = class else { return BTreeMap::new() };
+    let (of_class, other): (Vec<&ResultSet>, Vec<&ResultSet>) =
+        sets.iter().partition(|s| crate::results::runner_class(&s.provenance["machine"]) == Some(class));
+    let mut untimed: BTreeMap<&str, Untimed> = other.iter().map(|s| (s.id.as_str(), Untimed::OtherClass)).collect();
+    untimed.extend(drifted_calibrations(&of_class).into_iter().map(|(id, drift)| (id, Untimed::Drifted(drift))));
+    untimed
+}
+
 /// The runs of `runs` that equal time may compare: those of the sets
 /// measured on `class`, the runner class the season's times come from (all
-/// of them while it names none). A cost is CPU time, and CPU time depends
-/// on the CPU: a technique measured on a faster class would win on the
-/// machine, not on its work. Also returns a line saying what was left out.
+/// of them while it names none), whose runner's calibration was within
+/// [`CALIBRATION_DRIFT_LIMIT`] of the class's. A cost is CPU time, and CPU
+/// time depends on the CPU: a technique measured on a faster class, or on
+/// a runner that had slowed down, would win or lose on the machine, not on
+/// its work. Also returns lines saying what was left out and why.
 pub fn one_runner_class<'a>(
     sets: &[ResultSet],
     runs: &[&'a StoredRun],
     class: Option<&str>,
-) -> (Vec<&'a StoredRun>, Option<String>) {
-    let Some(class) = class else { return (runs.to_vec(), None) };
-    let other: BTreeSet<&str> = sets
-        .iter()
-        .filter(|s| crate::results::runner_class(&s.provenance["machine"]) != Some(class))
-        .map(|s| s.id.as_str())
-        .collect();
+) -> (Vec<&'a StoredRun>, Vec<String>) {
+    let untimed = untimed_sets(sets, class);
     let (kept, left): (Vec<&StoredRun>, Vec<&StoredRun>) =
-        runs.iter().partition(|r| !other.contains(r.result_id.as_str()));
+        runs.iter().partition(|r| !untimed.contains_key(r.result_id.as_str()));
     let left: BTreeSet<&str> = left.iter().map(|r| r.result_id.as_str()).collect();
-    let note = (!left.is_empty()).then(|| {
-        format!(
-            "{} result set(s) measured on another runner class are ranked at equal spp only: \
-             equal time compares the runs of this season's class, {class}",
-            left.len()
-        )
-    });
-    (kept, note)
+    let mut notes = Vec::new();
+    let left_other = left.iter().filter(|id| untimed[*id] == Untimed::OtherClass).count();
+    if let (true, Some(class)) = (left_other > 0, class) {
+        notes.push(format!(
+            "{left_other} result set(s) measured on another runner class are ranked at equal spp only: \
+             equal time compares the runs of this season's class, {class}"
+        ));
+    }
+    let left_drifted: Vec<String> = left
+        .iter()
+        .filter_map(|id| match untimed[*id] {
+            Untimed::Drifted(drift) => {
+                let technique = sets.iter().find(|s| s.id == *id).map_or("?", |s| s.technique.as_str());
+                Some(format!("{technique} ({})", drift.figures()))
+            }
+            Untimed::OtherClass => None,
+        })
+        .collect();
+    if !left_drifted.is_empty() {
+        notes.push(format!(
+            "{} result set(s) measured while their runner's calibration was more than {:.0} % from its class's \
+             are ranked at equal spp only (their costs would rank the machine): {}",
+            left_drifted.len(),
+            100.0 * CALIBRATION_DRIFT_LIMIT,
+            left_drifted.join(", ")
+        ));
+    }
+    (kept, notes)
+}
+
+/// A result set's calibration against its class's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drift {
+    /// The set's runner's CPU time for the calibration workload, in ms.
+    pub cpu_ms: f64,
+    /// The class's: the median over the sets compared.
+    pub class_ms: f64,
+}
+
+impl Drift {
+    /// How far the set's calibration lies from the class's, as a fraction.
+    pub fn ratio(&self) -> f64 {
+        self.cpu_ms / self.class_ms - 1.0
+    }
+
+    /// `44.1 ms against 39.4 ms, +12 %`.
+    pub fn figures(&self) -> String {
+        format!("{:.1} ms against {:.1} ms, {:+.0} %", self.cpu_ms, self.class_ms, 100.0 * self.ratio())
+    }
+}
+
+/// A result set's or a runner's calibration: (workload, CPU ms), from its
+/// machine record; `None` without one (from before calibrations).
+fn calibration_of(machine: &serde_json::Value) -> Option<(&str, f64)> {
+    let c = &machine["calibration"];
+    Some((c["workload"].as_str()?, c["cpu_ms"].as_f64().filter(|ms| *ms > 0.0)?))
+}
+
+/// A runner class's calibration by workload: the median over the sets of
+/// `of_class` (calibrations compare only under one workload).
+fn class_calibrations<'a>(of_class: &[&'a ResultSet]) -> BTreeMap<&'a str, f64> {
+    let mut by_workload: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    for (workload, ms) in of_class.iter().filter_map(|s| calibration_of(&s.provenance["machine"])) {
+        by_workload.entry(workload).or_default().push(ms);
+    }
+    by_workload
+        .into_iter()
+        .filter_map(|(workload, ms)| Some((workload, fbksd_exchange::stats::Spread::of(&ms)?.median)))
+        .collect()
+}
+
+/// How far `machine`'s calibration lies from `class_ms`'s, when beyond
+/// [`CALIBRATION_DRIFT_LIMIT`].
+fn drift_from(class_ms: &BTreeMap<&str, f64>, machine: &serde_json::Value) -> Option<Drift> {
+    let (workload, cpu_ms) = calibration_of(machine)?;
+    let drift = Drift { cpu_ms, class_ms: *class_ms.get(workload)? };
+    (drift.ratio().abs() > CALIBRATION_DRIFT_LIMIT).then_some(drift)
+}
+
+/// The sets among `of_class` (one runner class) whose calibration lies
+/// beyond [`CALIBRATION_DRIFT_LIMIT`] from the median of theirs, by set id.
+/// A set without one (from before calibrations) is kept, as before.
+pub fn drifted_calibrations<'a>(of_class: &[&'a ResultSet]) -> BTreeMap<&'a str, Drift> {
+    let class_ms = class_calibrations(of_class);
+    of_class.iter().filter_map(|s| Some((s.id.as_str(), drift_from(&class_ms, &s.provenance["machine"])?))).collect()
 }
 
 /// The pure part of [`build`].
@@ -737,6 +873,68 @@ mod tests {
         // A season that names no class yet compares everything.
         let unnamed = assemble(1, None, &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
         assert!(unnamed.left_out.is_empty() && unnamed.standings.iter().all(|s| s.mean_rank_time.is_finite()));
+    }
+
+    #[test]
+    fn a_set_measured_off_its_classs_calibration_is_left_out_of_equal_time_and_named() {
+        const CLASS: &str = "Some CPU · x86-64-v3 · 2 cores · 8 GiB";
+        let calibrated = |id: &str, technique: &str, calibration: serde_json::Value| {
+            let mut s = set(id, technique);
+            s.provenance = serde_json::json!({ "machine": { "class": CLASS, "calibration": calibration } });
+            s
+        };
+        let ms = |cpu_ms: f64| serde_json::json!({ "workload": "fbksd-calibration-1", "cpu_ms": cpu_ms });
+        // The same work everywhere; "hasty" ran on a runner 12 % faster than
+        // its class, so its costs look 12 % cheaper.
+        let sets = [
+            calibrated("a", "alpha", ms(40.0)),
+            calibrated("b", "beta", ms(41.0)),
+            calibrated("g", "gamma", ms(40.0)),
+            calibrated("c", "hasty", ms(35.2)),
+            // Within 10 % of the median (40.0), and one from before calibrations: kept.
+            calibrated("d", "delta", ms(38.5)),
+            calibrated("e", "epsilon", serde_json::Value::Null),
+            // Another workload is never compared with this one.
+            calibrated("f", "phi", serde_json::json!({ "workload": "fbksd-calibration-2", "cpu_ms": 10.0 })),
+        ];
+        let mut runs = Vec::new();
+        for (spp, t) in [(4, 10.0), (16, 40.0)] {
+            let e = 1.0 / spp as f64;
+            for id in ["a", "b", "d", "e", "f", "g"] {
+                runs.push(repeated(id, "s", spp, [e, 1.1 * e, 0.9 * e], t));
+            }
+            runs.push(repeated("c", "s", spp, [e, 1.1 * e, 0.9 * e], 0.88 * t));
+        }
+        let board = assemble(1, Some(CLASS), &sets, &runs, &BTreeMap::new(), &BoardQuery::default(), None);
+        let standing = |t: &str| board.standings.iter().find(|s| s.technique == t).unwrap();
+        assert!(standing("hasty").mean_rank_time.is_nan(), "hasty has no equal-time rank");
+        assert_eq!(standing("hasty").mean_rank, standing("alpha").mean_rank, "equal spp keeps it");
+        for kept in ["alpha", "beta", "gamma", "delta", "epsilon", "phi"] {
+            assert!(standing(kept).mean_rank_time.is_finite(), "{kept} is compared at equal time");
+        }
+        assert_eq!(
+            board.left_out,
+            ["1 result set(s) measured while their runner's calibration was more than 10 % from its class's are \
+              ranked at equal spp only (their costs would rank the machine): hasty (35.2 ms against 40.0 ms, -12 %)"]
+        );
+        // A runner is held back by the same measure against the published sets.
+        let season = SeasonData {
+            runner_class: Some(CLASS.into()),
+            sets: sets.to_vec(),
+            runs: Vec::new(),
+            tags: BTreeMap::new(),
+            boards: Mutex::default(),
+            pages: Mutex::default(),
+            documents: Mutex::default(),
+        };
+        let runner = |cpu_ms: f64| serde_json::json!({ "class": CLASS, "calibration": ms(cpu_ms) });
+        assert_eq!(
+            season.drift_of(&runner(44.4)).map(|d| d.figures()).as_deref(),
+            Some("44.4 ms against 40.0 ms, +11 %")
+        );
+        assert_eq!(season.drift_of(&runner(41.9)), None, "within 10 %");
+        let other_class = serde_json::json!({ "class": "Other", "calibration": ms(80.0) });
+        assert_eq!(season.drift_of(&other_class), None, "another class is kept out by its class, not its calibration");
     }
 
     #[test]

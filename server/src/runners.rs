@@ -156,6 +156,27 @@ pub async fn set_machine(pool: &AnyPool, runner_id: &str, machine: &serde_json::
     Ok(())
 }
 
+/// The season whose benchmarks `runner_id` is not handed now, if any: the
+/// current one, while the runner's latest calibration (its machine record,
+/// sent after each calibration) lies beyond the drift limit from its
+/// class's there. Its times would not compare with the board's; it still
+/// builds and makes references, and takes the benchmarks again once a
+/// calibration is back within the limit.
+pub async fn held_season(
+    pool: &AnyPool,
+    boards: &crate::leaderboard::BoardCache,
+    runner_id: &str,
+) -> Result<Option<i64>, sqlx::Error> {
+    let machine: Option<String> =
+        sqlx::query_scalar("SELECT machine FROM runners WHERE id = $1").bind(runner_id).fetch_optional(pool).await?;
+    let machine: serde_json::Value = machine.and_then(|m| serde_json::from_str(&m).ok()).unwrap_or_default();
+    if crate::results::runner_class(&machine).is_none() {
+        return Ok(None);
+    }
+    let season = crate::results::current_season(pool).await?;
+    Ok(boards.season(pool, season).await?.drift_of(&machine).map(|_| season))
+}
+
 /// Every runner, most recently seen first.
 pub async fn all(pool: &AnyPool) -> Result<Vec<Runner>, sqlx::Error> {
     let rows = sqlx::query(

@@ -89,6 +89,10 @@ async fn document(
     let class = season.runner_class.clone();
     let in_scenes: Vec<&StoredRun> = runs.iter().filter(|r| scenes.contains(&r.scene)).collect();
     let (timed, _) = crate::leaderboard::one_runner_class(&sets, &in_scenes, class.as_deref());
+    let untimed: BTreeMap<String, String> = crate::leaderboard::untimed_sets(&sets, class.as_deref())
+        .into_iter()
+        .map(|(id, why)| (id.to_string(), why.reason()))
+        .collect();
     let timed: BTreeSet<(&str, &str, i64)> =
         timed.iter().map(|r| (r.result_id.as_str(), r.scene.as_str(), r.spp)).collect();
     let is_timed = |e: &fbksd_exchange::results::IndexEntry| {
@@ -106,6 +110,7 @@ async fn document(
                 full_name: s.full_name().to_string(),
                 citation: s.info["citation"].as_str().unwrap_or("").trim().to_string(),
                 runner_class: results::runner_class(&s.provenance["machine"]).map(str::to_string),
+                untimed: untimed.get(&s.id).cloned(),
                 runs: runs
                     .iter()
                     .filter(|r| r.result_id == s.id && scenes.contains(&r.scene))

@@ -350,6 +350,25 @@ on_both_databases!(administrators_cancel_requeue_hide_and_start_seasons, |db: Db
     assert_eq!(board(1).await["standings"][0]["result_id"], result_id.as_str(), "the old season is kept");
 });
 
+/// Creates `user`'s private project `name` and pushes the Python box
+/// filter to it with FBKSD_RUN: a benchmark job is queued.
+async fn queue_benchmark(server: &common::TestServer, user: &common::TestUser, name: &str) {
+    server.create_project(user, name, "private").await;
+    let repo = technique_repository("box-filter-python");
+    assert!(push(repo.path(), &server.clone_url(name, &user.token), &["FBKSD_RUN"]).0);
+}
+
+/// The viewer document of result set `id`, as `user` gets it.
+async fn viewer_of(server: &common::TestServer, user: &common::TestUser, id: &str) -> Value {
+    let url = format!("{}/api/v1/results/{id}/viewer", server.url);
+    json_of(user.api(Method::GET, url).send().await.unwrap()).await.1
+}
+
+/// The technique of key `key` in a viewer document.
+fn technique_in(viewer: &Value, key: &str) -> Value {
+    viewer["techniques"].as_array().unwrap().iter().find(|t| t["key"] == key).unwrap().clone()
+}
+
 /// A claim by `runner`, which says it is of runner class `class`.
 async fn claim_as(runner: &FakeRunner, class: &str) -> Option<common::HeldJob> {
     runner.claim_with(json!({ "wait_seconds": 1, "runner_class": class })).await
@@ -368,14 +387,7 @@ on_both_databases!(
             let url = server.url.clone();
             async move { json_of(reqwest::get(format!("{url}/api/v1/leaderboard?season={season}")).await.unwrap()).await.1 }
         };
-        let queue = |name: &'static str| {
-            let (server, ada) = (&server, &ada);
-            async move {
-                server.create_project(ada, name, "private").await;
-                let repo = technique_repository("box-filter-python");
-                assert!(push(repo.path(), &server.clone_url(name, &ada.token), &["FBKSD_RUN"]).0);
-            }
-        };
+        let queue = |name: &'static str| queue_benchmark(&server, &ada, name);
 
         // While the season names no class, any runner takes its benchmarks; the
         // first result measured on a named class names the season's.
@@ -406,17 +418,9 @@ on_both_databases!(
             "{season_one}"
         );
         // So does its viewer: no equal-time place, no cost, its class named.
-        let viewer = json_of(
-            ada.api(Method::GET, format!("{}/api/v1/results/{}/viewer", server.url, published[1]))
-                .send()
-                .await
-                .unwrap(),
-        )
-        .await
-        .1;
+        let viewer = viewer_of(&server, &ada, &published[1]).await;
         assert_eq!(viewer["runner_class"], SLOW);
-        let technique =
-            |id: &str| viewer["techniques"].as_array().unwrap().iter().find(|t| t["key"] == id).unwrap().clone();
+        let technique = |id: &str| technique_in(&viewer, id);
         assert_eq!(technique(&published[1])["runner_class"], FAST);
         assert!(technique(&published[1])["runs"].as_array().unwrap().iter().all(|r| r["cost_ms"] == 0.0), "{viewer}");
         let places = |at: &str| -> Vec<Value> {
@@ -478,6 +482,70 @@ on_both_databases!(
         .await;
         assert_eq!(status, 201, "{season}");
         assert_eq!(board(3).await["runner_class"], SLOW);
+    }
+);
+
+on_both_databases!(
+    a_runner_whose_calibration_drifted_from_its_class_is_held_back_and_its_set_left_out_of_equal_time,
+    |db: Db| async move {
+        const CLASS: &str = "Some CPU · x86-64-v3 · 2 cores · 8 GiB";
+        let machine = |cpu_ms: f64| json!({ "class": CLASS, "calibration": { "workload": "fbksd-calibration-1", "cpu_ms": cpu_ms } });
+        let server = spawn(db).await;
+        let admin = server.admin().await;
+        let ada = server.user("ada@example.org").await;
+        let runner = FakeRunner::register(&server, "drifting").await;
+        let queue = |name: &'static str| queue_benchmark(&server, &ada, name);
+        // Three sets of one class; the third measured while its runner ran 14 % slower.
+        let mut published = Vec::new();
+        for (name, cpu_ms) in [("steady", 40.0), ("steadier", 40.4), ("slowed", 46.0)] {
+            queue(name).await;
+            let job = claim_as(&runner, CLASS).await.expect("a runner of the class takes it");
+            common::upload_results_on(&runner, &job, 1.0, machine(cpu_ms)).await;
+            let id =
+                job.finish(&runner, json!({ "state": "succeeded" })).await.1["result_id"].as_str().unwrap().to_string();
+            ada.api(Method::POST, format!("{}/api/v1/results/{id}/publish", server.url)).send().await.unwrap();
+            published.push(id);
+        }
+        let board = json_of(reqwest::get(format!("{}/api/v1/leaderboard", server.url)).await.unwrap()).await.1;
+        let standing =
+            |id: &str| board["standings"].as_array().unwrap().iter().find(|s| s["result_id"] == id).unwrap().clone();
+        assert_eq!(standing(&published[0])["mean_rank_time"], 1.5, "tied with steadier, the same numbers: {board}");
+        assert!(standing(&published[2])["mean_rank_time"].is_null(), "{board}");
+        assert_eq!(standing(&published[2])["mean_rank"], standing(&published[0])["mean_rank"], "equal spp keeps it");
+        let note = board["left_out"][0].as_str().unwrap_or_default();
+        assert!(
+            note.starts_with("1 result set(s) measured while their runner's calibration was more than 10 %")
+                && note.ends_with("slowed (46.0 ms against 40.4 ms, +14 %)"),
+            "{board}"
+        );
+        // The viewer says why it is off the time axis.
+        let viewer = viewer_of(&server, &ada, &published[2]).await;
+        let technique = |id: &str| technique_in(&viewer, id);
+        assert_eq!(technique(&published[2])["untimed"], "its runner's calibration +14 % from its class's", "{viewer}");
+        assert!(technique(&published[0]).get("untimed").is_none(), "{viewer}");
+
+        // A runner that reports such a calibration now is not handed the
+        // season's benchmarks, and the pages say why.
+        let (status, _) = runner.post("runners/status", json!({ "preparing": null, "machine": machine(45.0) })).await;
+        assert_eq!(status, 204);
+        queue("waiting").await;
+        assert!(claim_as(&runner, CLASS).await.is_none(), "held back while its calibration is off");
+        let page = admin.browser.get(format!("{}/admin", server.url)).send().await.unwrap().text().await.unwrap();
+        assert!(
+            page.contains("held back from season 1&#39;s benchmarks: its calibration is off its class&#39;s (45.0 ms against 40.4 ms, +11 %)"),
+            "{page}"
+        );
+        let home = reqwest::get(format!("{}/", server.url)).await.unwrap().text().await.unwrap();
+        assert!(
+            home.contains("The runners of this season&#39;s class are held back from its benchmarks")
+                && home.contains("drifting: 45.0 ms against 40.4 ms, +11 %"),
+            "{home}"
+        );
+        // Back within 10 %, it takes them again.
+        let (status, _) = runner.post("runners/status", json!({ "preparing": null, "machine": machine(41.0) })).await;
+        assert_eq!(status, 204);
+        let job = claim_as(&runner, CLASS).await.expect("back within the limit");
+        assert_eq!(job.body["job"]["kind"], "benchmark");
     }
 );
 

@@ -349,6 +349,26 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
     let rows: Vec<&str> = csv.as_str().unwrap().lines().skip(1).collect();
     assert_eq!(rows, [r#""'=HYPERLINK(""http://x.example"",""y"")",4,1,2"#, r#""'@SUM(A1)",4,1,2"#]);
 
+    // A technique equal time leaves out (another runner class, or a runner
+    // whose calibration had drifted) is off the time axis, and says why.
+    let series = browser
+        .eval(
+            r#"const doc = { runner_class: "C", rankings: { equal_time: [{ scene: "s", metric: "MSE", at: { ms: 5 }, places: ["a", "b", "c"].map((k) => ({ technique: k, mean: 1 })) }] },
+              techniques: [{ key: "a", name: "a", full_name: "a", runner_class: "C", runs: [] },
+                { key: "b", name: "b", full_name: "b", runner_class: "C", untimed: "its runner's calibration +14 % from its class's", runs: [] },
+                { key: "c", name: "c", full_name: "c", runner_class: "D", runs: [] }] };
+            return FBKSD.chartSeries(doc, "s", "MSE", "equal_time").map((s) => [s.name, s.points.length]);"#,
+        )
+        .await;
+    let series: Vec<(String, usize)> = serde_json::from_value(series).unwrap();
+    assert_eq!(series[0].1, 1, "{series:?}");
+    assert!(
+        series[1].0.ends_with("(its runner's calibration +14 % from its class's: not on the time axis)")
+            && series[1].1 == 0,
+        "{series:?}"
+    );
+    assert!(series[2].0.ends_with("(another runner class: not on the time axis)") && series[2].1 == 0, "{series:?}");
+
     // A pixel file is decompressed no further than its header says: a runner
     // could upload kilobytes that inflate to gigabytes in every viewer's tab.
     let refused = browser

@@ -26,8 +26,10 @@
   // The time axis of a chart: at equal time always the ranking's, the cost.
   FBKSD.timeMeasure = (kind, measure) => TIME_MEASURES[kind === "equal_time" ? "cost" : measure] || TIME_MEASURES.cost;
   // Times are CPU times of one runner class: a technique measured on
-  // another would be compared on its machine, not on its work.
-  FBKSD.otherRunnerClass = (doc, t) => Boolean(doc.runner_class) && t.runner_class !== doc.runner_class;
+  // another, or on a runner whose calibration had drifted from its
+  // class's, would be compared on its machine, not on its work. Says why
+  // a technique is off the time axis ("" when it is on it).
+  FBKSD.untimed = (doc, t) => t.untimed || (doc.runner_class && t.runner_class !== doc.runner_class ? "another runner class" : "");
 
   // The series of a chart: [{key, name, colour, points: [{x, y, spp}]}].
   // kind: "spp", "time" or "equal_time" (whose points are the ranking's
@@ -48,9 +50,9 @@
           .filter((p) => p.x > 0)
           .sort((a, b) => a.x - b.x);
       }
-      const otherClass = kind !== "spp" && FBKSD.otherRunnerClass(doc, t);
-      const name = FBKSD.techniqueLabel(t) + (otherClass ? " (another runner class: not on the time axis)" : "");
-      return { key: t.key, name, colour: FBKSD.colourOf(i), points: otherClass ? [] : points };
+      const untimed = kind !== "spp" && FBKSD.untimed(doc, t);
+      const name = FBKSD.techniqueLabel(t) + (untimed ? " (" + untimed + ": not on the time axis)" : "");
+      return { key: t.key, name, colour: FBKSD.colourOf(i), points: untimed ? [] : points };
     });
   };
 

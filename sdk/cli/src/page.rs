@@ -85,6 +85,7 @@ pub fn write(results: &ResultsDir, scenes: &BTreeMap<String, SceneMeta>, out: &P
             full_name: technique.to_string(),
             citation: String::new(),
             runner_class: None,
+            untimed: None,
             runs,
         });
     }

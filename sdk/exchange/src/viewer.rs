@@ -151,6 +151,11 @@ pub struct ViewerTechnique {
     /// The runner class its runs were measured on, when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub runner_class: Option<String>,
+    /// Why equal time leaves its runs out, when it does: measured on
+    /// another runner class than the document's, or while its runner's
+    /// calibration was off its class's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub untimed: Option<String>,
     /// Its runs.
     pub runs: Vec<ViewerRun>,
 }

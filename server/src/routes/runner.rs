@@ -60,13 +60,16 @@ pub async fn claim(
     let deadline = Instant::now() + Duration::from_secs(wait);
     let lease_ms = state.config.lease_seconds as i64 * 1000;
     let (pool, postgres) = (&state.pool, state.postgres);
+    let held_season = crate::runners::held_season(pool, &state.boards, &runner_id).await?;
     loop {
         // Expired leases are queued again by the server's sweeper (every second).
         let notified = state.job_queued.notified();
         let mut claimed =
             crate::jobs::claim_reference(pool, postgres, &runner_id, lease_ms, &request.reference_keys).await?;
         if claimed.is_none() && !request.references_only {
-            claimed = crate::jobs::claim(pool, postgres, &runner_id, lease_ms, request.runner_class.as_deref()).await?;
+            claimed =
+                crate::jobs::claim(pool, postgres, &runner_id, lease_ms, request.runner_class.as_deref(), held_season)
+                    .await?;
         }
         if let Some(claimed) = claimed {
             let job = claimed.job;

@@ -6,6 +6,8 @@ struct RunnerRow {
     name: String,
     machine: String,
     healthy: bool,
+    /// Why it is not handed the current season's benchmarks, when it is not.
+    held: Option<String>,
     last_seen: String,
     running_jobs: i64,
 }
@@ -36,6 +38,8 @@ pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) ->
     admin_of(&nav)?;
     let now = crate::now_ms();
     let all = crate::runners::all(&state.pool).await?;
+    let season = crate::results::current_season(&state.pool).await?;
+    let season_data = state.boards.season(&state.pool, season).await?;
     let runner_classes: Vec<String> = all
         .iter()
         .filter_map(|r| crate::results::runner_class(&r.machine).map(str::to_string))
@@ -46,6 +50,12 @@ pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) ->
         .into_iter()
         .map(|r| RunnerRow {
             healthy: r.healthy(&state.config, now),
+            held: season_data.drift_of(&r.machine).map(|d| {
+                format!(
+                    "held back from season {season}'s benchmarks: its calibration is off its class's ({})",
+                    d.figures()
+                )
+            }),
             name: r.name,
             machine: r.machine.to_string(),
             last_seen: when(r.last_seen_at),
@@ -53,7 +63,6 @@ pub async fn admin_page(State(state): State<AppState>, Visitor(nav): Visitor) ->
         })
         .collect();
     let jobs = crate::jobs::all(&state.pool, 200).await?.iter().map(job_row).collect();
-    let season = crate::results::current_season(&state.pool).await?;
     let season_class = crate::results::season_class(&state.pool, season).await?;
     Ok(render(&AdminPage { nav, runners, jobs, season, season_class, runner_classes }))
 }

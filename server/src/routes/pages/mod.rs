@@ -239,10 +239,26 @@ async fn preparation(state: &AppState, user: Option<&User>) -> Result<Vec<String
     // A season's benchmarks go only to runners of its class (see `jobs::claim`).
     let season = crate::results::current_season(&state.pool).await?;
     if let Some(class) = crate::results::season_class(&state.pool, season).await? {
-        if !connected.iter().any(|r| crate::results::runner_class(&r.machine) == Some(class.as_str())) {
+        let of_class: Vec<_> =
+            connected.iter().filter(|r| crate::results::runner_class(&r.machine) == Some(class.as_str())).collect();
+        let season_data = state.boards.season(&state.pool, season).await?;
+        let held: Vec<String> = of_class
+            .iter()
+            .filter_map(|r| season_data.drift_of(&r.machine).map(|d| format!("{}: {}", r.name, d.figures())))
+            .collect();
+        if of_class.is_empty() {
             lines.push(format!(
                 "No connected runner is of this season's runner class ({class}): benchmarks wait in the queue \
                  until one is, or until an administrator starts a season for the runners' class."
+            ));
+        } else if held.len() == of_class.len() {
+            lines.push(format!(
+                "The runners of this season's class are held back from its benchmarks: their calibration lies \
+                 more than {:.0} % from the class's ({}), so their times would not compare with the board's. \
+                 Benchmarks wait in the queue until a runner's calibration is back within it (runners calibrate \
+                 between jobs and every few minutes while idle).",
+                100.0 * crate::leaderboard::CALIBRATION_DRIFT_LIMIT,
+                held.join("; ")
             ));
         }
     }
