@@ -86,6 +86,56 @@ pub struct Config {
     /// sits behind a reverse proxy that sets it (e.g. `X-Forwarded-For`:
     /// its last entry is taken); empty means the connection's peer address.
     pub client_ip_header: String,
+    /// The reverse proxies whose `client_ip_header` is believed: addresses
+    /// or networks, comma-separated (`"10.0.0.0/8, 127.0.0.1"`). A request
+    /// from any other peer is counted by the peer's own address, so a
+    /// client that reaches the server without the proxy cannot name itself
+    /// anyone (and slip its per-address limits). Required with
+    /// `client_ip_header`.
+    pub trusted_proxies: Networks,
+}
+
+/// Addresses and networks, written `"10.0.0.0/8, 127.0.0.1"` (an address
+/// alone is its own network).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Networks(pub Vec<ipnet::IpNet>);
+
+impl Networks {
+    /// Whether `ip` is in one of them.
+    pub fn contain(&self, ip: std::net::IpAddr) -> bool {
+        self.0.iter().any(|net| net.contains(&ip))
+    }
+}
+
+impl fmt::Display for Networks {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let nets: Vec<String> = self.0.iter().map(ToString::to_string).collect();
+        f.write_str(&nets.join(", "))
+    }
+}
+
+impl std::str::FromStr for Networks {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Networks, String> {
+        let networks = text.split(',').map(str::trim).filter(|part| !part.is_empty()).map(|part| {
+            part.parse::<ipnet::IpNet>()
+                .or_else(|_| part.parse::<std::net::IpAddr>().map(ipnet::IpNet::from))
+                .map_err(|_| format!("{part:?} is not an address or a network like \"10.0.0.0/8\""))
+        });
+        Ok(Networks(networks.collect::<Result<_, _>>()?))
+    }
+}
+
+impl Serialize for Networks {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for Networks {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Networks, D::Error> {
+        String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
+    }
 }
 
 /// At most `count` events per `window`, refilled evenly (a burst of
@@ -173,6 +223,7 @@ impl Default for Config {
             mail_limit_per_address: RateLimit::new(5, Duration::from_secs(3600)),
             mail_limit_per_ip: RateLimit::new(20, Duration::from_secs(3600)),
             client_ip_header: String::new(),
+            trusted_proxies: Networks::default(),
         }
     }
 }
@@ -193,7 +244,16 @@ impl Config {
             figment = figment.merge(Toml::file(file));
         }
         figment = figment.merge(Env::prefixed("FBKSD_SERVER_"));
-        figment.extract().map_err(|e| ConfigError(e.to_string()))
+        let config: Config = figment.extract().map_err(|e| ConfigError(e.to_string()))?;
+        if !config.client_ip_header.is_empty() && config.trusted_proxies.0.is_empty() {
+            return Err(ConfigError(format!(
+                "client_ip_header is {:?} but trusted_proxies is empty: the header would be believed from any \
+                 client, which could then name itself anyone; set trusted_proxies to the addresses of the \
+                 proxies that set it (e.g. \"10.0.0.0/8\")",
+                config.client_ip_header
+            )));
+        }
+        Ok(config)
     }
 
     /// The database URL to use: the configured one, or SQLite in `data_dir`.
@@ -233,6 +293,23 @@ mod tests {
         let error = Config::load(Some(&file)).unwrap_err().to_string();
         assert!(error.contains("bnid"), "{error}");
         assert!(Config::load(Some(&dir.path().join("missing.toml"))).is_err());
+    }
+
+    #[test]
+    fn a_client_ip_header_needs_the_proxies_it_is_believed_from() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("server.toml");
+        std::fs::write(&file, "client_ip_header = \"X-Forwarded-For\"\n").unwrap();
+        let refused = Config::load(Some(&file)).unwrap_err().to_string();
+        assert!(refused.contains("trusted_proxies is empty"), "{refused}");
+        std::fs::write(&file, "client_ip_header = \"X-Forwarded-For\"\ntrusted_proxies = \"10.0.0.0/8, 127.0.0.1\"\n")
+            .unwrap();
+        let proxies = Config::load(Some(&file)).unwrap().trusted_proxies;
+        assert!(proxies.contain("10.1.2.3".parse().unwrap()) && proxies.contain("127.0.0.1".parse().unwrap()));
+        assert!(!proxies.contain("127.0.0.2".parse().unwrap()));
+        assert_eq!(proxies.to_string(), "10.0.0.0/8, 127.0.0.1/32");
+        let bad = "10.0.0.0/33".parse::<Networks>().unwrap_err();
+        assert_eq!(bad, "\"10.0.0.0/33\" is not an address or a network like \"10.0.0.0/8\"");
     }
 
     #[test]

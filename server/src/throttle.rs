@@ -212,29 +212,35 @@ fn evict(map: &mut HashMap<u64, Instant>, now: Instant) {
     }
 }
 
-/// The client's network address: the connection's peer, or the last entry
-/// of the configured `client_ip_header` behind a reverse proxy.
+/// The client's network address: the connection's peer, or, when the peer
+/// is one of the `trusted_proxies`, the address the outermost trusted proxy
+/// saw, from the configured `client_ip_header`.
 pub struct ClientIp(pub IpAddr);
 
 impl FromRequestParts<AppState> for ClientIp {
     type Rejection = std::convert::Infallible;
 
     async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
+        let peer = parts.extensions.get::<ConnectInfo<SocketAddr>>().map(|c| c.0.ip());
         let name = &state.config.client_ip_header;
-        if !name.is_empty() {
-            let forwarded = parts
+        if !name.is_empty() && peer.is_some_and(|p| state.config.trusted_proxies.contain(p)) {
+            let chain: Vec<IpAddr> = parts
                 .headers
                 .get_all(name.as_str())
                 .iter()
                 .filter_map(|v| v.to_str().ok())
                 .flat_map(|v| v.split(','))
                 .filter_map(|v| v.trim().parse::<IpAddr>().ok())
-                .next_back();
-            if let Some(ip) = forwarded {
-                return Ok(ClientIp(ip));
+                .collect();
+            // Each proxy appends the address it saw: from the right, the
+            // first that is not a trusted proxy is the client (entries to
+            // its left are the client's own say).
+            let trusted = &state.config.trusted_proxies;
+            let client = chain.iter().rev().find(|ip| !trusted.contain(**ip)).or(chain.first());
+            if let Some(ip) = client {
+                return Ok(ClientIp(*ip));
             }
         }
-        let peer = parts.extensions.get::<ConnectInfo<SocketAddr>>().map(|c| c.0.ip());
         // Without connection info (a router served another way) every
         // client shares one counter: limited, never unlimited.
         Ok(ClientIp(peer.unwrap_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED))))

@@ -384,6 +384,45 @@ async fn log_in_floods_are_refused_per_address_and_per_client() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_forwarded_address_is_believed_only_from_a_trusted_proxy() {
+    const PROXY: &str = "127.0.0.10";
+    let server = common::spawn_with(Db::Sqlite, |c| {
+        c.login_limit_per_address = RateLimit::OFF;
+        c.login_limit_per_ip = RateLimit::new(3, Duration::from_secs(600));
+        c.client_ip_header = "X-Forwarded-For".into();
+        c.trusted_proxies = PROXY.parse().unwrap();
+    })
+    .await;
+    let guess = |client: &reqwest::Client, forwarded: &str| {
+        client
+            .post(format!("{}/api/v1/sessions", server.url))
+            .header("X-Forwarded-For", forwarded)
+            .json(&json!({ "email": "nobody@example.org", "password": "a guessed password" }))
+            .send()
+    };
+
+    // A client that reaches the server without the proxy cannot name itself
+    // anyone: each guess under another made-up address counts as its own.
+    let direct = client_from("127.0.0.2");
+    for i in 0..3 {
+        assert_eq!(guess(&direct, &format!("203.0.113.{i}")).await.unwrap().status(), 401);
+    }
+    let (_, message) = limited(guess(&direct, "203.0.113.99").await.unwrap()).await;
+    assert!(message.contains("network address"), "{message}");
+
+    // Through the proxy, the address it saw counts: each client behind it
+    // has its own limit, and what a client writes into the header itself
+    // (left of what the proxy appends) changes nothing.
+    let proxy = client_from(PROXY);
+    for _ in 0..3 {
+        assert_eq!(guess(&proxy, "198.51.100.1").await.unwrap().status(), 401);
+    }
+    assert_eq!(guess(&proxy, "198.51.100.1").await.unwrap().status(), 429);
+    assert_eq!(guess(&proxy, "203.0.113.7, 198.51.100.1").await.unwrap().status(), 429, "a made-up first entry");
+    assert_eq!(guess(&proxy, "198.51.100.2").await.unwrap().status(), 401, "another client behind the proxy");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_unknown_address_takes_as_long_as_a_wrong_password() {
     let server = common::spawn_with(Db::Sqlite, |c| {
         c.login_limit_per_address = RateLimit::OFF;
