@@ -3,6 +3,7 @@
 use crate::accounts::{self, Email, Password};
 use crate::config::Config;
 use crate::mail::Mailer;
+use std::future::IntoFuture;
 use std::sync::Arc;
 use tokio::net::TcpListener;
 
@@ -47,6 +48,8 @@ impl AppState {
 pub struct Application {
     listener: TcpListener,
     router: axum::Router,
+    /// `metrics_bind`'s listener and its router, when it is set.
+    metrics: Option<(TcpListener, axum::Router)>,
     admin: Option<(String, String)>,
     registration_token: Option<String>,
     url: String,
@@ -158,7 +161,16 @@ impl Application {
                 tokio::time::sleep(std::time::Duration::from_secs(3600)).await;
             }
         });
-        Ok(Application { listener, router: crate::routes::router(state), admin, registration_token, url, config })
+        let metrics = if config.metrics_bind.is_empty() {
+            None
+        } else {
+            let listener = TcpListener::bind(&config.metrics_bind)
+                .await
+                .map_err(|e| anyhow::anyhow!("bind {} (metrics_bind): {e}", config.metrics_bind))?;
+            Some((listener, crate::routes::metrics_router().with_state(state.clone())))
+        };
+        let router = crate::routes::router(state);
+        Ok(Application { listener, router, metrics, admin, registration_token, url, config })
     }
 
     /// The URL users reach the server at (the configured public URL, or the bound address).
@@ -174,6 +186,11 @@ impl Application {
     /// The port the server listens on.
     pub fn port(&self) -> u16 {
         self.listener.local_addr().map_or(0, |a| a.port())
+    }
+
+    /// The address `/metrics` is served on when `metrics_bind` is set.
+    pub fn metrics_address(&self) -> Option<std::net::SocketAddr> {
+        self.metrics.as_ref().and_then(|(listener, _)| listener.local_addr().ok())
     }
 
     /// The administrator created by this start (e-mail, one-time password),
@@ -200,7 +217,15 @@ impl Application {
         let idle = IDLE_TIMEOUT.max(std::time::Duration::from_secs(2 * self.config.long_poll_seconds + 30));
         // `tap_io` (a no-op) is what gives a wrapped listener's connections their peer address.
         let listener = TimedListener::new(self.listener, HEADER_READ_TIMEOUT, idle).tap_io(|_| {});
-        axum::serve(listener, service).await
+        let public = axum::serve(listener, service).into_future();
+        match self.metrics {
+            Some((metrics_listener, metrics_router)) => {
+                let metrics_listener = TimedListener::new(metrics_listener, HEADER_READ_TIMEOUT, IDLE_TIMEOUT);
+                let metrics = axum::serve(metrics_listener, metrics_router).into_future();
+                tokio::try_join!(public, metrics).map(|_| ())
+            }
+            None => public.await,
+        }
     }
 }
 

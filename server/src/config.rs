@@ -28,6 +28,12 @@ impl fmt::Debug for Secret {
 pub struct Config {
     /// Address to listen on (`host:port`; port 0 picks a free one).
     pub bind: String,
+    /// Address to serve `/metrics` on, apart from `bind` (`host:port`):
+    /// what faces the public then has no `/metrics`, and only what
+    /// reaches this address (Prometheus on the cluster's network) reads
+    /// the service's counters. Empty serves it on `bind`, for a server
+    /// only its own machine reaches (README's local start).
+    pub metrics_bind: String,
     /// Where the server keeps its data: the SQLite database, the mail
     /// outbox, git repositories and results.
     pub data_dir: PathBuf,
@@ -201,6 +207,7 @@ impl Default for Config {
     fn default() -> Self {
         Config {
             bind: "127.0.0.1:8096".into(),
+            metrics_bind: String::new(),
             data_dir: PathBuf::from("fbksd-data"),
             database_url: Secret::default(),
             public_url: String::new(),

@@ -12,6 +12,23 @@ async fn get(server: &TestServer, path: &str) -> (u16, String) {
     (response.status().as_u16(), response.text().await.unwrap())
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn metrics_can_be_kept_off_the_public_port() {
+    let server = common::spawn_with(Db::Sqlite, |c| c.metrics_bind = "127.0.0.1:0".into()).await;
+    // What faces the public has no /metrics...
+    assert_eq!(get(&server, "/metrics").await.0, 404);
+    assert_eq!(get(&server, "/healthz").await.0, 200);
+    // ... the operators' address has, and counts what the public port answered.
+    let metrics_url = server.metrics_url.clone().expect("a metrics address");
+    let response = reqwest::get(format!("{metrics_url}/metrics")).await.unwrap();
+    assert_eq!(response.status(), 200);
+    let text = response.text().await.unwrap();
+    let healthz = r#"fbksd_http_request_duration_seconds_count{method="GET",route="/healthz",status="200"}"#;
+    assert_eq!(common::sample(&text, healthz), Some(1.0), "{text}");
+    // And nothing else is served there.
+    assert_eq!(reqwest::get(format!("{metrics_url}/api/v1/me")).await.unwrap().status(), 404);
+}
+
 on_both_databases!(health_readiness_and_metrics_follow_the_service, |db: Db| async move {
     let server = spawn(db).await;
     assert_eq!(get(&server, "/healthz").await, (200, "ok\n".into()));

@@ -47,6 +47,12 @@ fn session_cookie(state: &AppState, token: &str) -> String {
     format!("{SESSION_COOKIE}={token}; Path=/; HttpOnly; SameSite=Lax; Max-Age={max_age}{secure}")
 }
 
+/// `/metrics`: on the public router, or alone on `metrics_bind`'s listener
+/// ([`crate::Application`]).
+pub fn metrics_router() -> Router<AppState> {
+    Router::new().route("/metrics", get(operations::metrics))
+}
+
 /// The router of the whole server.
 pub fn router(state: AppState) -> Router {
     Router::new()
@@ -124,7 +130,7 @@ pub fn router(state: AppState) -> Router {
         // Operators and orchestrators.
         .route("/healthz", get(operations::healthz))
         .route("/readyz", get(operations::readyz))
-        .route("/metrics", get(operations::metrics))
+        .merge(if state.config.metrics_bind.is_empty() { metrics_router() } else { Router::new() })
         // After routing, so that answers are timed by their route's pattern.
         .route_layer(axum::middleware::from_fn_with_state(state.clone(), operations::track))
         .layer(axum::middleware::from_fn_with_state(state.clone(), pages::error_pages_keep_the_header))

@@ -17,6 +17,8 @@ pub enum Db {
 /// A running server and what a test needs to drive it.
 pub struct TestServer {
     pub url: String,
+    /// Where `/metrics` is served, when `metrics_bind` is set.
+    pub metrics_url: Option<String>,
     pub outbox: PathBuf,
     pub admin: Option<(String, String)>,
     config: Config,
@@ -68,15 +70,16 @@ pub async fn spawn_with(db: Db, adjust: impl FnOnce(&mut Config)) -> TestServer 
     let outbox = config.outbox_dir();
     let app = fbksd_server::Application::build(config.clone()).await.expect("server starts");
     let url = format!("http://127.0.0.1:{}", app.port());
+    let metrics_url = app.metrics_address().map(|a| format!("http://{a}"));
     let admin = app.admin_credentials().cloned();
     tokio::spawn(app.run());
-    TestServer { url, outbox, admin, config, _data: Some(std::sync::Arc::new(data)) }
+    TestServer { url, metrics_url, outbox, admin, config, _data: Some(std::sync::Arc::new(data)) }
 }
 
 impl TestServer {
     /// A server started elsewhere (another process) at `url`, writing its mail to `outbox`.
     pub fn at(url: String, outbox: PathBuf) -> TestServer {
-        TestServer { url, outbox, admin: None, config: Config::default(), _data: None }
+        TestServer { url, metrics_url: None, outbox, admin: None, config: Config::default(), _data: None }
     }
 
     /// A second server instance on the same database and data directory,
@@ -84,9 +87,11 @@ impl TestServer {
     pub async fn another_instance(&self) -> TestServer {
         let app = fbksd_server::Application::build(self.config.clone()).await.expect("second instance starts");
         let url = format!("http://127.0.0.1:{}", app.port());
+        let metrics_url = app.metrics_address().map(|a| format!("http://{a}"));
         tokio::spawn(app.run());
         TestServer {
             url,
+            metrics_url,
             outbox: self.outbox.clone(),
             admin: None,
             config: self.config.clone(),
