@@ -159,6 +159,9 @@ pub struct User {
     pub verified: bool,
     /// Whether the user administers the server.
     pub is_admin: bool,
+    /// Whether the user must choose a password before anything else (the
+    /// first administrator's one-time password was printed to the log).
+    pub must_change_password: bool,
 }
 
 fn user_of(row: &sqlx::any::AnyRow) -> Result<User, sqlx::Error> {
@@ -167,7 +170,15 @@ fn user_of(row: &sqlx::any::AnyRow) -> Result<User, sqlx::Error> {
         email: row.try_get("email")?,
         verified: row.try_get::<i64, _>("verified")? != 0,
         is_admin: row.try_get::<i64, _>("is_admin")? != 0,
+        must_change_password: row.try_get::<i64, _>("must_change_password")? != 0,
     })
+}
+
+/// Requires `user_id` to choose a password before anything else
+/// ([`User::must_change_password`]).
+pub async fn require_password_change(pool: &AnyPool, user_id: &str) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE users SET must_change_password = 1 WHERE id = $1").bind(user_id).execute(pool).await?;
+    Ok(())
 }
 
 /// Registers an unverified account and mails its verification link.
@@ -245,7 +256,7 @@ pub async fn create_user(
     .execute(pool)
     .await;
     match inserted {
-        Ok(_) => Ok(User { id, email: email.as_str().to_string(), verified, is_admin }),
+        Ok(_) => Ok(User { id, email: email.as_str().to_string(), verified, is_admin, must_change_password: false }),
         Err(sqlx::Error::Database(e)) if e.is_unique_violation() => Err(ServiceError::conflict(
             "email_taken",
             format!("an account with {} exists: log in, or reset its password", email.as_str()),
@@ -346,7 +357,7 @@ pub async fn reset_password(pool: &AnyPool, token: &str, password: &Password) ->
     let hash = password.hash().await?;
     let mut tx = pool.begin().await?;
     let user_id = redeem(&mut tx, token, "reset").await?;
-    sqlx::query("UPDATE users SET password_hash = $1, verified = 1 WHERE id = $2")
+    sqlx::query("UPDATE users SET password_hash = $1, verified = 1, must_change_password = 0 WHERE id = $2")
         .bind(&hash)
         .bind(&user_id)
         .execute(&mut *tx)
@@ -376,10 +387,12 @@ pub async fn authenticate(pool: &AnyPool, email: &str, password: &str) -> Result
     if password.chars().count() > 1024 {
         return Err(wrong());
     }
-    let row = sqlx::query("SELECT id, email, password_hash, verified, is_admin FROM users WHERE email = $1")
-        .bind(email.as_str())
-        .fetch_optional(pool)
-        .await?;
+    let row = sqlx::query(
+        "SELECT id, email, password_hash, verified, is_admin, must_change_password FROM users WHERE email = $1",
+    )
+    .bind(email.as_str())
+    .fetch_optional(pool)
+    .await?;
     let hash = row.as_ref().map(|r| r.try_get::<String, _>("password_hash")).transpose()?;
     let matches = verify_password(password, hash).await?;
     let Some(row) = row.filter(|_| matches) else { return Err(wrong()) };
@@ -423,7 +436,8 @@ pub async fn open_session(pool: &AnyPool, user_id: &str, hours: u64) -> Result<N
 /// The user and CSRF token of a live session.
 pub async fn session_user(pool: &AnyPool, token: &str) -> Result<Option<(User, String)>, sqlx::Error> {
     let row = sqlx::query(
-        "SELECT u.id, u.email, u.verified, u.is_admin, s.csrf_token FROM sessions s JOIN users u ON u.id = s.user_id \
+        "SELECT u.id, u.email, u.verified, u.is_admin, u.must_change_password, s.csrf_token \
+         FROM sessions s JOIN users u ON u.id = s.user_id \
          WHERE s.token_hash = $1 AND s.expires_at > $2",
     )
     .bind(digest(token))
@@ -443,7 +457,7 @@ pub async fn close_session(pool: &AnyPool, token: &str) -> Result<(), sqlx::Erro
 pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) -> Result<(), ServiceError> {
     let hash = password.hash().await?;
     let mut tx = pool.begin().await?;
-    sqlx::query("UPDATE users SET password_hash = $1 WHERE id = $2")
+    sqlx::query("UPDATE users SET password_hash = $1, must_change_password = 0 WHERE id = $2")
         .bind(&hash)
         .bind(user_id)
         .execute(&mut *tx)
@@ -451,6 +465,14 @@ pub async fn set_password(pool: &AnyPool, user_id: &str, password: &Password) ->
     sqlx::query("DELETE FROM sessions WHERE user_id = $1").bind(user_id).execute(&mut *tx).await?;
     tx.commit().await?;
     Ok(())
+}
+
+/// Replaces `user_id`'s password, given the current one; every session
+/// ends (the caller logs in again), and a pending one-time password is
+/// replaced.
+pub async fn change_password(pool: &AnyPool, user_id: &str, current: &str, new: &str) -> Result<(), ServiceError> {
+    check_password(pool, user_id, current).await?;
+    set_password(pool, user_id, &Password::parse(new)?).await
 }
 
 /// Checks a user's current password (for changes that need it).
@@ -465,7 +487,7 @@ pub async fn check_password(pool: &AnyPool, user_id: &str, password: &str) -> Re
 
 /// The user with id `id`, if any.
 pub async fn user_by_id(pool: &AnyPool, id: &str) -> Result<Option<User>, sqlx::Error> {
-    let row = sqlx::query("SELECT id, email, verified, is_admin FROM users WHERE id = $1")
+    let row = sqlx::query("SELECT id, email, verified, is_admin, must_change_password FROM users WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await?;
@@ -571,7 +593,8 @@ pub async fn token_user(pool: &AnyPool, token: &str) -> Result<Option<User>, sql
         return Ok(None);
     }
     let row = sqlx::query(
-        "SELECT u.id, u.email, u.verified, u.is_admin FROM access_tokens t JOIN users u ON u.id = t.user_id \
+        "SELECT u.id, u.email, u.verified, u.is_admin, u.must_change_password \
+         FROM access_tokens t JOIN users u ON u.id = t.user_id \
          WHERE t.token_hash = $1",
     )
     .bind(digest(token))

@@ -86,7 +86,10 @@ impl Application {
                 ("admin@localhost.localdomain".to_string(), accounts::random_token()[..20].to_string());
             let parsed = (Email::parse(&email), Password::parse(&password));
             let (Ok(e), Ok(p)) = parsed else { anyhow::bail!("bootstrap administrator credentials are invalid") };
-            accounts::create_user(&pool, &e, &p, true, true).await.map_err(|e| anyhow::anyhow!("{}", e.message))?;
+            let user =
+                accounts::create_user(&pool, &e, &p, true, true).await.map_err(|e| anyhow::anyhow!("{}", e.message))?;
+            // Printed to the log: it must be replaced before it can do anything.
+            accounts::require_password_change(&pool, &user.id).await?;
             Some((email, password))
         };
 

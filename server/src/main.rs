@@ -83,7 +83,7 @@ async fn main() -> anyhow::Result<()> {
         );
     }
     if let Some((email, password)) = app.admin_credentials() {
-        println!("administrator created: {email} / {password} (shown once: change it after logging in)");
+        println!("administrator created: {email} / {password} (shown once: logging in leads to the form that replaces it, and nothing else opens until it is replaced)");
     }
     if let Some(token) = app.runner_registration_token() {
         println!("runner registration token: {token} (shown once; an administrator can rotate it)");

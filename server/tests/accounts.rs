@@ -384,6 +384,52 @@ async fn log_in_floods_are_refused_per_address_and_per_client() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_first_administrator_replaces_the_one_time_password_before_anything_else() {
+    let server = spawn(Db::Sqlite).await;
+    let (email, one_time) = server.admin.clone().expect("first start creates an administrator");
+    // Logging in through the form leads to the password form.
+    let browser = server.browser();
+    let logged_in = post_form(&server, &browser, "/login", &[("email", &email), ("password", &one_time)]).await;
+    assert_eq!(logged_in.url().path(), "/settings");
+    let settings = logged_in.text().await.unwrap();
+    assert!(settings.contains("id=\"choose-password\"") && settings.contains("action=\"/settings/password\""));
+    let csrf = csrf_in(&settings);
+
+    // Until then, every page and call but the change says what to do.
+    let admin_page = browser.get(format!("{}/admin", server.url)).send().await.unwrap();
+    assert_eq!(admin_page.status(), 403);
+    assert!(admin_page.text().await.unwrap().contains("choose your own password first"));
+    let token = browser
+        .post(format!("{}/api/v1/tokens", server.url))
+        .header("X-CSRF-Token", &csrf)
+        .json(&json!({ "name": "before" }))
+        .send()
+        .await
+        .unwrap();
+    let (status, code) = error_code(token).await;
+    assert_eq!((status, code.as_str()), (403, "password_change_required"));
+    let me: Value = browser.get(format!("{}/api/v1/me", server.url)).send().await.unwrap().json().await.unwrap();
+    assert_eq!(me["must_change_password"], true, "{me}");
+
+    // A wrong current password changes nothing and says so.
+    let form = |current: &str| {
+        let fields =
+            [("csrf_token", csrf.as_str()), ("current_password", current), ("new_password", "my very own password")];
+        browser.post(format!("{}/settings/password", server.url)).form(&fields).send()
+    };
+    let wrong = form("a guess").await.unwrap().text().await.unwrap();
+    assert!(wrong.contains("the current password is wrong"), "{wrong}");
+    // The right one: every session ends, and the new password opens everything.
+    let changed = form(&one_time).await.unwrap().text().await.unwrap();
+    assert!(changed.contains("Password changed"), "{changed}");
+    assert_eq!(browser.get(format!("{}/api/v1/me", server.url)).send().await.unwrap().status(), 401);
+    assert_eq!(log_in(&browser, &server.url, &email, &one_time).await.status(), 401);
+    let session: Value = log_in(&browser, &server.url, &email, "my very own password").await.json().await.unwrap();
+    assert_eq!(session["user"]["must_change_password"], false, "{session}");
+    assert_eq!(browser.get(format!("{}/admin", server.url)).send().await.unwrap().status(), 200);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_forwarded_address_is_believed_only_from_a_trusted_proxy() {
     const PROXY: &str = "127.0.0.10";
     let server = common::spawn_with(Db::Sqlite, |c| {

@@ -177,9 +177,7 @@ pub async fn change_password(
     caller: Caller,
     Json(body): Json<PasswordChange>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
-    accounts::check_password(&state.pool, &caller.user.id, &body.current_password).await?;
-    let password = Password::parse(&body.new_password)?;
-    accounts::set_password(&state.pool, &caller.user.id, &password).await?;
+    accounts::change_password(&state.pool, &caller.user.id, &body.current_password, &body.new_password).await?;
     Ok(Json(json!({ "changed": true, "message": "password changed: log in again" })))
 }
 

@@ -38,7 +38,7 @@ pub use error::ApiError;
 pub const SESSION_COOKIE: &str = "fbksd_session";
 
 /// A `Set-Cookie` value that ends the session cookie.
-const ENDED_SESSION_COOKIE: &str = "fbksd_session=; Path=/; HttpOnly; SameSite=Lax; Max-Age=0";
+pub(crate) const ENDED_SESSION_COOKIE: &str = "fbksd_session=; Path=/; HttpOnly; SameSite=Lax; Max-Age=0";
 
 /// The `Set-Cookie` value of a new session (Secure when the server is reached over HTTPS).
 fn session_cookie(state: &AppState, token: &str) -> String {
@@ -113,6 +113,7 @@ pub fn router(state: AppState) -> Router {
         .route("/logout", post(pages::logout))
         .route("/settings", get(pages::settings))
         .route("/settings/tokens", post(pages::create_token))
+        .route("/settings/password", post(pages::change_password))
         .route("/settings/tokens/{id}/revoke", post(pages::revoke_token))
         .route("/projects", get(pages::projects_page).post(pages::create_project))
         .route("/environments", get(pages::environments_page))
@@ -201,6 +202,23 @@ impl FromRequestParts<AppState> for SessionUser {
     }
 }
 
+/// What a user who must choose a password first may still do through the
+/// API: choose it (`PATCH /api/v1/me`), read who they are, and log out.
+fn allowed_before_password_change(parts: &Parts) -> bool {
+    let path = parts.uri.path();
+    (path == "/api/v1/me" && (parts.method == Method::PATCH || parts.method == Method::GET))
+        || (path == "/api/v1/sessions" && parts.method == Method::DELETE)
+}
+
+/// The refusal for a user who must choose a password first.
+pub fn password_change_required() -> ApiError {
+    ApiError::forbidden(
+        "password_change_required",
+        "choose your own password first: the one-time password printed at the server's first start must be \
+         changed (Settings → Password on the site, or PATCH /api/v1/me with current_password and new_password)",
+    )
+}
+
 /// An authenticated caller: a browser session (CSRF-checked for state
 /// changes) or a personal access token.
 pub struct Caller {
@@ -230,9 +248,19 @@ impl FromRequestParts<AppState> for Caller {
             let user = crate::accounts::token_user(&state.pool, token)
                 .await?
                 .ok_or_else(|| ApiError::unauthorized("unknown or revoked access token"))?;
-            return Ok(Caller { user });
+            return Caller::unless_password_change_pending(parts, user);
         }
-        SessionUser::from_request_parts(parts, state).await.map(|s| Caller { user: s.user })
+        let user = SessionUser::from_request_parts(parts, state).await?.user;
+        Caller::unless_password_change_pending(parts, user)
+    }
+}
+
+impl Caller {
+    fn unless_password_change_pending(parts: &Parts, user: User) -> Result<Caller, ApiError> {
+        if user.must_change_password && !allowed_before_password_change(parts) {
+            return Err(password_change_required());
+        }
+        Ok(Caller { user })
     }
 }
 

@@ -15,6 +15,10 @@ pub enum Db {
 }
 
 /// A running server and what a test needs to drive it.
+/// The password tests give the first administrator in place of its
+/// one-time password ([`TestServer::admin`]).
+pub const ADMIN_PASSWORD: &str = "the administrator's own password";
+
 pub struct TestServer {
     pub url: String,
     /// Where `/metrics` is served, when `metrics_bind` is set.
@@ -183,10 +187,29 @@ impl TestServer {
         TestUser { email: email.into(), browser, csrf, token: token["token"].as_str().unwrap().to_string() }
     }
 
-    /// The administrator created at start, logged in.
+    /// The administrator created at start, logged in, having replaced the
+    /// one-time password first (as the server requires) with
+    /// [`ADMIN_PASSWORD`].
     pub async fn admin(&self) -> TestUser {
-        let (email, password) = self.admin.clone().expect("first start creates an administrator");
-        self.log_in(&email, &password, self.browser()).await
+        let (email, one_time) = self.admin.clone().expect("first start creates an administrator");
+        let browser = self.browser();
+        let log_in = |password: &str| {
+            browser
+                .post(format!("{}/api/v1/sessions", self.url))
+                .json(&serde_json::json!({ "email": email, "password": password }))
+                .send()
+        };
+        if log_in(ADMIN_PASSWORD).await.unwrap().status() != 200 {
+            let (_, session) = json_of(log_in(&one_time).await.unwrap()).await;
+            assert_eq!(session["user"]["must_change_password"], true, "{session}");
+            let csrf = session["csrf_token"].as_str().expect("logged in with the one-time password");
+            let change = browser
+                .patch(format!("{}/api/v1/me", self.url))
+                .header("X-CSRF-Token", csrf)
+                .json(&serde_json::json!({ "current_password": one_time, "new_password": ADMIN_PASSWORD }));
+            assert_eq!(change.send().await.unwrap().status(), 200, "the one-time password is replaced");
+        }
+        self.log_in(&email, ADMIN_PASSWORD, browser).await
     }
 
     /// The URL of a project's repository with `token` as the password.

@@ -99,7 +99,8 @@ pub async fn login(
     attempt.succeeded();
     let session = accounts::open_session(&state.pool, &user.id, state.config.session_hours).await?;
     let cookie = crate::routes::session_cookie(&state, &session.token);
-    Ok(([(header::SET_COOKIE, cookie)], Redirect::to("/projects")).into_response())
+    let next = if user.must_change_password { "/settings#password" } else { "/projects" };
+    Ok(([(header::SET_COOKIE, cookie)], Redirect::to(next)).into_response())
 }
 
 /// `POST /register`.
@@ -184,9 +185,11 @@ struct SettingsPage {
     nav: Nav,
     tokens: Vec<TokenRow>,
     new_token: String,
+    /// Why the password was not changed, when it was not.
+    password_error: String,
 }
 
-async fn settings_page(state: &AppState, nav: Nav, new_token: String) -> PageResult {
+async fn settings_page(state: &AppState, nav: Nav, new_token: String, password_error: String) -> PageResult {
     let user = nav.user.as_ref().ok_or_else(|| ApiError::unauthorized("log in first"))?;
     let tokens = accounts::access_tokens(&state.pool, &user.id)
         .await?
@@ -198,12 +201,37 @@ async fn settings_page(state: &AppState, nav: Nav, new_token: String) -> PageRes
             last_used: t.last_used_at.map(when).unwrap_or_else(|| "never".into()),
         })
         .collect();
-    Ok(render(&SettingsPage { nav, tokens, new_token }))
+    Ok(render(&SettingsPage { nav, tokens, new_token, password_error }))
 }
 
 /// `GET /settings`.
 pub async fn settings(State(state): State<AppState>, Visitor(nav): Visitor) -> PageResult {
-    settings_page(&state, nav, String::new()).await
+    settings_page(&state, nav, String::new(), String::new()).await
+}
+
+/// The password form.
+#[derive(Deserialize)]
+pub struct PasswordForm {
+    csrf_token: String,
+    current_password: String,
+    new_password: String,
+}
+
+/// `POST /settings/password`: every session ends (this one too), as with
+/// the API's `PATCH /api/v1/me`; the visitor logs in again.
+pub async fn change_password(
+    State(state): State<AppState>,
+    visitor: Visitor,
+    PageForm(form): PageForm<PasswordForm>,
+) -> PageResult {
+    let user = visitor.check(&form.csrf_token)?.clone();
+    let changed = accounts::change_password(&state.pool, &user.id, &form.current_password, &form.new_password).await;
+    if let Err(e) = changed {
+        return settings_page(&state, visitor.0, String::new(), ApiError::from(e).message).await;
+    }
+    let nav = Nav { user: None, csrf: String::new() };
+    let page = message(nav, "Password changed", "Your sessions have ended: log in again with your new password.");
+    Ok(([(header::SET_COOKIE, crate::routes::ENDED_SESSION_COOKIE)], page).into_response())
 }
 
 /// A new token's name.
@@ -221,7 +249,7 @@ pub async fn create_token(
 ) -> PageResult {
     let user = visitor.check(&form.csrf_token)?;
     let (_, token) = accounts::create_access_token(&state.pool, &user.id, &form.name).await?;
-    settings_page(&state, visitor.0, token).await
+    settings_page(&state, visitor.0, token, String::new()).await
 }
 
 /// `POST /settings/tokens/{id}/revoke`.

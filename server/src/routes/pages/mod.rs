@@ -57,6 +57,13 @@ impl FromRequestParts<AppState> for Visitor {
             return Ok(Visitor(Nav { user: None, csrf: String::new() }));
         };
         let session = accounts::session_user(&state.pool, token).await.map_err(ApiError::from)?;
+        // Until a one-time password is replaced, the settings page (where it
+        // is) and logging out are all a session may see.
+        let path = parts.uri.path();
+        let allowed = path == "/settings" || path == "/settings/password" || path == "/logout";
+        if session.as_ref().is_some_and(|(user, _)| user.must_change_password) && !allowed {
+            return Err(crate::routes::password_change_required().into());
+        }
         Ok(Visitor(match session {
             Some((user, csrf)) => Nav { user: Some(user), csrf },
             None => Nav { user: None, csrf: String::new() },
