@@ -121,7 +121,7 @@ pub struct Board {
     pub groups: Vec<Group>,
     /// Per scene whose runs were scored against different references: what
     /// was left out ([`one_reference_per_scene`]); and the sets measured on
-    /// another runner class, left out of equal time ([`one_runner_class`]).
+    /// another runner class, left out of equal time ([`untimed_sets`]).
     pub left_out: Vec<String>,
     /// The runner class the season's times come from, once one is named.
     pub runner_class: Option<String>,
@@ -435,7 +435,7 @@ pub fn untimed_sets<'a>(sets: &'a [ResultSet], class: Option<&str>) -> BTreeMap<
 /// time depends on the CPU: a technique measured on a faster class, or on
 /// a runner that had slowed down, would win or lose on the machine, not on
 /// its work. Also returns lines saying what was left out and why.
-pub fn one_runner_class<'a>(
+fn one_runner_class<'a>(
     sets: &[ResultSet],
     runs: &[&'a StoredRun],
     class: Option<&str>,
@@ -446,7 +446,8 @@ pub fn one_runner_class<'a>(
     let left: BTreeSet<&str> = left.iter().map(|r| r.result_id.as_str()).collect();
     let mut notes = Vec::new();
     let left_other = left.iter().filter(|id| untimed[*id] == Untimed::OtherClass).count();
-    if let (true, Some(class)) = (left_other > 0, class) {
+    // Sets are untimed only under a named class.
+    if let Some(class) = class.filter(|_| left_other > 0) {
         notes.push(format!(
             "{left_other} result set(s) measured on another runner class are ranked at equal spp only: \
              equal time compares the runs of this season's class, {class}"
@@ -526,7 +527,7 @@ fn drift_from(class_ms: &BTreeMap<&str, f64>, machine: &serde_json::Value) -> Op
 /// The sets among `of_class` (one runner class) whose calibration lies
 /// beyond [`CALIBRATION_DRIFT_LIMIT`] from the median of theirs, by set id.
 /// A set without one (from before calibrations) is kept, as before.
-pub fn drifted_calibrations<'a>(of_class: &[&'a ResultSet]) -> BTreeMap<&'a str, Drift> {
+fn drifted_calibrations<'a>(of_class: &[&'a ResultSet]) -> BTreeMap<&'a str, Drift> {
     let class_ms = class_calibrations(of_class);
     of_class.iter().filter_map(|s| Some((s.id.as_str(), drift_from(&class_ms, &s.provenance["machine"])?))).collect()
 }

@@ -86,18 +86,13 @@ async fn document(
     let lower_is_better =
         |acronym: &str| doc.metrics.iter().find(|m| m.acronym == acronym).is_none_or(|m| m.lower_is_better);
     // Equal time and the costs compare only the runs of the season's runner class.
+    // (the entries' technique is their set's id).
     let class = season.runner_class.clone();
-    let in_scenes: Vec<&StoredRun> = runs.iter().filter(|r| scenes.contains(&r.scene)).collect();
-    let (timed, _) = crate::leaderboard::one_runner_class(&sets, &in_scenes, class.as_deref());
     let untimed: BTreeMap<String, String> = crate::leaderboard::untimed_sets(&sets, class.as_deref())
         .into_iter()
         .map(|(id, why)| (id.to_string(), why.reason()))
         .collect();
-    let timed: BTreeSet<(&str, &str, i64)> =
-        timed.iter().map(|r| (r.result_id.as_str(), r.scene.as_str(), r.spp)).collect();
-    let is_timed = |e: &fbksd_exchange::results::IndexEntry| {
-        timed.contains(&(e.technique.as_str(), e.scene.as_str(), e.spp as i64))
-    };
+    let is_timed = |e: &fbksd_exchange::results::IndexEntry| !untimed.contains_key(&e.technique);
     doc.rankings = Rankings::of(&entries, is_timed, lower_is_better);
     let timed_entries: Vec<_> = entries.iter().filter(|e| is_timed(e)).cloned().collect();
     doc.runner_class = class;

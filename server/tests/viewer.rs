@@ -356,7 +356,7 @@ async fn the_owner_compares_pixels_charts_and_ranks_in_the_viewer() {
             r#"const doc = { runner_class: "C", rankings: { equal_time: [{ scene: "s", metric: "MSE", at: { ms: 5 }, places: ["a", "b", "c"].map((k) => ({ technique: k, mean: 1 })) }] },
               techniques: [{ key: "a", name: "a", full_name: "a", runner_class: "C", runs: [] },
                 { key: "b", name: "b", full_name: "b", runner_class: "C", untimed: "its runner's calibration +14 % from its class's", runs: [] },
-                { key: "c", name: "c", full_name: "c", runner_class: "D", runs: [] }] };
+                { key: "c", name: "c", full_name: "c", runner_class: "D", untimed: "another runner class", runs: [] }] };
             return FBKSD.chartSeries(doc, "s", "MSE", "equal_time").map((s) => [s.name, s.points.length]);"#,
         )
         .await;

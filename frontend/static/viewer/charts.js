@@ -27,9 +27,10 @@
   FBKSD.timeMeasure = (kind, measure) => TIME_MEASURES[kind === "equal_time" ? "cost" : measure] || TIME_MEASURES.cost;
   // Times are CPU times of one runner class: a technique measured on
   // another, or on a runner whose calibration had drifted from its
-  // class's, would be compared on its machine, not on its work. Says why
-  // a technique is off the time axis ("" when it is on it).
-  FBKSD.untimed = (doc, t) => t.untimed || (doc.runner_class && t.runner_class !== doc.runner_class ? "another runner class" : "");
+  // class's, would be compared on its machine, not on its work. The server
+  // decides which (leaderboard::untimed_sets); this says why a technique
+  // is off the time axis ("" when it is on it).
+  FBKSD.untimed = (t) => t.untimed || "";
 
   // The series of a chart: [{key, name, colour, points: [{x, y, spp}]}].
   // kind: "spp", "time" or "equal_time" (whose points are the ranking's
@@ -50,7 +51,7 @@
           .filter((p) => p.x > 0)
           .sort((a, b) => a.x - b.x);
       }
-      const untimed = kind !== "spp" && FBKSD.untimed(doc, t);
+      const untimed = kind !== "spp" && FBKSD.untimed(t);
       const name = FBKSD.techniqueLabel(t) + (untimed ? " (" + untimed + ": not on the time axis)" : "");
       return { key: t.key, name, colour: FBKSD.colourOf(i), points: untimed ? [] : points };
     });

@@ -15,7 +15,7 @@
   FBKSD.rank = function (doc, scenes, metric, kind) {
     // A missing place counts as last among the techniques the cells rank
     // (at equal time, those of the season's runner class), as on the board.
-    const ranked = kind === "equal_time" ? doc.techniques.filter((t) => !FBKSD.untimed(doc, t)) : doc.techniques;
+    const ranked = kind === "equal_time" ? doc.techniques.filter((t) => !FBKSD.untimed(t)) : doc.techniques;
     const n = ranked.length;
     const cells = ((doc.rankings && doc.rankings[kind || "equal_spp"]) || []).filter((c) => c.metric === metric && scenes.has(c.scene));
     const sums = new Map(), perScene = new Map(), ties = new Map();
@@ -136,7 +136,7 @@
         row.append(cell("td", FBKSD.techniqueLabel(t)), cell("td", String(r.spp), "num"), status);
         const cv = (spread) => (spread && r.seeds > 1 ? " (CV " + (spread.cv * 100).toFixed(1) + " %)" : "");
         const timing = r.timing || {};
-        for (const v of [String(r.seeds || 1), FBKSD.untimed(doc, t) || ms(r.cost_ms), ms(r.technique_cpu_ms) + cv(timing.technique_cpu), ms(r.startup_ms), ms(r.technique_ms) + cv(timing.technique), ms(r.time_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
+        for (const v of [String(r.seeds || 1), FBKSD.untimed(t) || ms(r.cost_ms), ms(r.technique_cpu_ms) + cv(timing.technique_cpu), ms(r.startup_ms), ms(r.technique_ms) + cv(timing.technique), ms(r.time_ms), ms(r.render_ms), ms(r.wall_ms), ms(r.cpu_ms), bytes(r.peak_memory_bytes), String(r.used_samples)]) {
           row.append(cell("td", v, "num"));
         }
         for (const m of doc.metrics) {
