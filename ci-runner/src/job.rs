@@ -9,6 +9,9 @@
 //! 4. **Benchmark** (benchmark jobs): every scene of the pool at each
 //!    budget, one run after another, through the manager with the
 //!    [`DockerLauncher`]; then the metrics, here, against the references.
+//!    A seeds job makes only the runs it names, with the seeds it names,
+//!    and uploads their values alone (the server adds them to the
+//!    published set a tie on the board rests on).
 //! 5. **Upload** the files and the results, and report the end.
 //!
 //! Every failure is a [`Failure`] with a typed [`FailureReason`] and a message the
@@ -22,6 +25,7 @@ use crate::machine::Machine;
 use crate::pool::PoolScene;
 use crate::sandbox::{ContainerEnd, ContainerSpec, Mount, Sandbox};
 use crate::RunnerConfig;
+use fbksd_exchange::ranking::RunKey;
 use fbksd_exchange::results::{path_safe_name, ResultsDir};
 use fbksd_exchange::runner_api::Claim;
 use fbksd_exchange::runner_api::{ImageRef, JobKind, Provenance, SandboxLimits, SceneProvenance, Upload};
@@ -250,7 +254,7 @@ pub async fn run(
         image.id
     ));
     let install = build(ctx, claim, &info, &src, dir, log).await?;
-    if claim.job.kind != JobKind::Benchmark {
+    if !matches!(claim.job.kind, JobKind::Benchmark | JobKind::Seeds) {
         return Ok(format!("built in {:.1} s", started.elapsed().as_secs_f64()));
     }
     if cancelled.load(Ordering::SeqCst) {
@@ -573,13 +577,23 @@ async fn benchmark(
         Environment::Cpp => vec![exe],
         Environment::Python => vec!["python3".into(), exe],
     };
+    let seeds = more_seeds(ctx, claim, info)?;
+    if !seeds.is_empty() {
+        log.line(format!("[fbksd-ci] more seeds for {} runs a tie on the board rests on", seeds.len()));
+    }
     let scenes = ctx
         .scenes
         .iter()
         .map(|s| SceneSpec {
             name: s.meta.name.clone(),
             renderer_argv: s.renderer_argv(),
-            spps: if ctx.config.spp.is_empty() { s.meta.spp.clone() } else { ctx.config.spp.clone() },
+            spps: if !seeds.is_empty() {
+                claim.more_seeds.iter().filter(|r| r.scene == path_safe_name(&s.meta.name)).map(|r| r.spp).collect()
+            } else if ctx.config.spp.is_empty() {
+                s.meta.spp.clone()
+            } else {
+                ctx.config.spp.clone()
+            },
         })
         .collect();
     // With four cores or more, the renderer and the technique get disjoint
@@ -623,7 +637,7 @@ async fn benchmark(
     };
     let log = log.clone();
     let records = tokio::task::spawn_blocking(move || {
-        bench.run(|p| {
+        let progress = |p: Progress<'_>| {
             if let Progress::RunFinished(r) = p {
                 let how = if r.status == RunStatus::Ok {
                     format!("technique {:.1} ms, render {:.1} ms", r.times.technique_ms, r.times.render_ms)
@@ -633,7 +647,12 @@ async fn benchmark(
                 let seed = if r.repeat > 0 { format!(" (seed {})", r.seed) } else { String::new() };
                 log.line(format!("[fbksd-ci] {} at {} spp{seed}: {}", r.scene, r.spp_budget, how));
             }
-        })
+        };
+        if seeds.is_empty() {
+            bench.run(progress)
+        } else {
+            bench.run_more_seeds(&seeds, progress)
+        }
     })
     .await
     .map_err(|e| Failure::infrastructure(format!("the benchmark panicked: {e}")))?
@@ -660,6 +679,29 @@ async fn benchmark(
     Ok(records.iter().map(|r| Duration::from_secs_f64(r.times.wall_ms / 1e3)).sum())
 }
 
+/// A seeds job's runs, by their names in this benchmark's results (empty
+/// for a benchmark job). A scene this runner lacks fails the attempt as
+/// the infrastructure's: a runner with the season's pool takes it again.
+fn more_seeds(
+    ctx: &JobContext,
+    claim: &Claim,
+    info: &TechniqueInfo,
+) -> Result<std::collections::BTreeMap<RunKey, std::ops::Range<u32>>, Failure> {
+    let mut runs = std::collections::BTreeMap::new();
+    for run in &claim.more_seeds {
+        let Some(scene) = ctx.scenes.iter().find(|s| path_safe_name(&s.meta.name) == run.scene) else {
+            return Err(Failure::infrastructure(format!("this runner's scene pool lacks {}", run.scene)));
+        };
+        let key = RunKey {
+            technique: path_safe_name(&info.short_name),
+            scene: path_safe_name(&scene.meta.name),
+            spp: run.spp,
+        };
+        runs.insert(key, run.seeds());
+    }
+    Ok(runs)
+}
+
 /// The upload, the files to send with it, and the success message.
 type Collected = (Upload, Vec<(String, PathBuf)>, String);
 
@@ -682,23 +724,37 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
     // Repeats beyond the first are scored here and their images dropped:
     // the viewer shows a run's first repeat, the values carry all of them.
     let mut index = index;
+    let seeds = claim.job.kind == JobKind::Seeds;
     for run in &mut index.runs {
-        for repeat in run.repeats.iter_mut().skip(1) {
+        for repeat in run.repeats.iter_mut().skip(if seeds { 0 } else { 1 }) {
             if let Some(image) = repeat.image.take() {
                 let _ = std::fs::remove_file(results.join(image));
             }
+            if seeds {
+                repeat.log.clear();
+            }
+        }
+        if seeds {
+            (run.image, run.log) = (None, String::new());
         }
     }
+    // A seeds job adds values to a set that has its images and logs.
     let mut files = Vec::new();
-    files_under(results, &results.join(path_safe_name(&info.short_name)), &mut files);
-    files_under(results, &results.join("renderer-logs"), &mut files);
-    files.extend(references_to_upload(ctx, claim, results).await?);
+    if !seeds {
+        files_under(results, &results.join(path_safe_name(&info.short_name)), &mut files);
+        files_under(results, &results.join("renderer-logs"), &mut files);
+        files.extend(references_to_upload(ctx, claim, results).await?);
+    }
     let failed = index.runs.iter().filter(|r| r.status != RunStatus::Ok).count();
-    let message = if failed == 0 {
+    let repeats: usize = index.runs.iter().map(|r| r.repeats.len()).sum();
+    let message = if seeds {
+        format!("{repeats} more seeds of {} runs ({failed} of the runs failed)", index.runs.len())
+    } else if failed == 0 {
         format!("{} runs on {} scenes", index.runs.len(), ctx.scenes.len())
     } else {
         format!("{} runs on {} scenes, {failed} of them failed (they rank last)", index.runs.len(), ctx.scenes.len())
     };
+    let ran: std::collections::BTreeSet<String> = index.runs.iter().map(|r| r.scene.clone()).collect();
     let environment_image = ctx.images.for_environment(info.environment);
     let upload = Upload {
         runs: index.runs,
@@ -706,6 +762,7 @@ async fn collect(ctx: &JobContext, claim: &Claim, info: &TechniqueInfo, results:
         scenes: ctx
             .scenes
             .iter()
+            .filter(|s| !seeds || ran.contains(&path_safe_name(&s.meta.name)))
             .map(|s| SceneProvenance {
                 name: path_safe_name(&s.meta.name),
                 tags: s.meta.tags.clone(),

@@ -66,6 +66,11 @@ pub struct Config {
     pub max_attempts: u64,
     /// Longest a runner's claim waits for a job, in seconds.
     pub long_poll_seconds: u64,
+    /// The most seeds a published run is given when a tie on the board
+    /// rests on it that more seeds could settle ([`crate::seeds`]): each
+    /// round doubles the seeds of the runs behind the tie up to this; 0:
+    /// never ask for more seeds.
+    pub max_seeds: u32,
     /// Largest log a job may write, in bytes.
     pub max_log_bytes: u64,
     /// Largest upload of one job (results and files together), in bytes.
@@ -220,6 +225,7 @@ impl Default for Config {
             max_job_seconds: 24 * 3600,
             max_attempts: 3,
             long_poll_seconds: 25,
+            max_seeds: 12,
             max_log_bytes: 4 << 20,
             max_upload_bytes: 256 << 20,
             max_queued_jobs_per_user: 3,

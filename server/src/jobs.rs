@@ -63,7 +63,15 @@ pub struct Job {
     pub result_id: Option<String>,
     /// The reference it makes (reference jobs).
     pub reference_key: Option<String>,
+    /// The published result set it adds seeds to (seeds jobs).
+    pub more_seeds_of: Option<String>,
+    /// The runs it makes again, and their seeds (seeds jobs).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub more_seeds: Vec<MoreSeeds>,
 }
+
+/// A seeds job's run (shared with the runner).
+pub use fbksd_exchange::runner_api::MoreSeeds;
 
 impl Job {
     /// The job as a reader who may not see its result set reads it: the
@@ -84,7 +92,7 @@ pub fn hide_result(text: &str, id: &str) -> String {
 
 const JOB_COLUMNS: &str = "j.id, j.pipeline_id, j.project_id, p.name AS project_name, j.user_id, j.kind, j.state, \
      j.failure_reason, j.message, j.attempts, j.max_attempts, j.runner_id, pl.commit_sha, j.season, j.created_at, \
-     j.started_at, j.finished_at, r.id AS result_id, j.reference_key";
+     j.started_at, j.finished_at, r.id AS result_id, j.reference_key, j.more_seeds_of, j.more_seeds";
 const JOB_FROM: &str = "jobs j JOIN projects p ON p.id = j.project_id JOIN pipelines pl ON pl.id = j.pipeline_id \
      LEFT JOIN result_sets r ON r.job_id = j.id";
 
@@ -109,6 +117,12 @@ fn job_of(row: &sqlx::any::AnyRow) -> Result<Job, sqlx::Error> {
         finished_at: row.try_get("finished_at")?,
         result_id: row.try_get("result_id")?,
         reference_key: row.try_get("reference_key")?,
+        more_seeds_of: row.try_get("more_seeds_of")?,
+        more_seeds: row
+            .try_get::<Option<String>, _>("more_seeds")?
+            .map(|json| serde_json::from_str(&json).map_err(|e| sqlx::Error::Decode(Box::new(e))))
+            .transpose()?
+            .unwrap_or_default(),
     })
 }
 
@@ -184,7 +198,7 @@ pub async fn claim(
     // The held season is a number, never text from a client.
     let pick = format!(
         "SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
-         WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark') \
+         WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark', 'seeds') \
          AND (j.kind = 'build' OR NOT EXISTS (SELECT 1 FROM seasons s WHERE s.number = j.season \
               AND s.runner_class IS NOT NULL AND s.runner_class <> $5)) \
          AND (j.kind = 'build' OR j.season <> {}) \
@@ -506,6 +520,8 @@ pub struct NewJob<'a> {
     pub finished_at: Option<i64>,
     /// The reference it makes (reference jobs).
     pub reference_key: Option<&'a str>,
+    /// The published set it adds seeds to, and the runs (seeds jobs).
+    pub more_seeds: Option<(&'a str, &'a [MoreSeeds])>,
 }
 
 /// Creates a job in its pipeline's transaction.
@@ -513,7 +529,8 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewJob<'_>)
     sqlx::query(
         "INSERT INTO jobs (id, pipeline_id, project_id, user_id, kind, state, failure_reason, message, attempts, \
          max_attempts, season, publish_on_success, counts_for_quota, log_bytes, upload_bytes, created_at, finished_at, \
-         reference_key) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14, $15)",
+         reference_key, more_seeds_of, more_seeds) \
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14, $15, $16, $17)",
     )
     .bind(new.id)
     .bind(new.pipeline_id)
@@ -530,6 +547,8 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewJob<'_>)
     .bind(now_ms())
     .bind(new.finished_at)
     .bind(new.reference_key)
+    .bind(new.more_seeds.map(|(set, _)| set))
+    .bind(new.more_seeds.map(|(_, runs)| serde_json::to_string(runs).unwrap_or_default()))
     .execute(&mut **tx)
     .await?;
     Ok(())
@@ -704,7 +723,8 @@ pub async fn cancel_as(pool: &AnyPool, id: &str, user: &User) -> Result<(), Serv
 
 /// Queued jobs of a user.
 pub async fn queued_count(pool: &AnyPool, user_id: &str) -> Result<i64, sqlx::Error> {
-    let row = sqlx::query("SELECT COUNT(*) AS n FROM jobs WHERE user_id = $1 AND state = 'queued'")
+    // Seeds jobs are the server's asking, not the user's: they hold no place.
+    let row = sqlx::query("SELECT COUNT(*) AS n FROM jobs WHERE user_id = $1 AND state = 'queued' AND kind <> 'seeds'")
         .bind(user_id)
         .fetch_one(pool)
         .await?;

@@ -37,6 +37,7 @@ pub mod references;
 pub mod results;
 pub mod routes;
 pub mod runners;
+pub mod seeds;
 pub mod slots;
 pub mod telemetry;
 pub mod throttle;

@@ -354,6 +354,7 @@ pub async fn start(
         counts_for_quota: kind != JobKind::Publish && job_state == JobState::Queued && source != Source::Season,
         finished_at: finished,
         reference_key: None,
+        more_seeds: None,
     };
     crate::jobs::insert(&mut tx, &new_job).await?;
     tx.commit().await?;
@@ -592,6 +593,10 @@ async fn end_job(
         }
         (JobState::Succeeded, _) if job.kind == JobKind::Reference => {
             crate::references::store(state, &job).await?;
+            Ok(None)
+        }
+        (JobState::Succeeded, _) if job.kind == JobKind::Seeds => {
+            crate::seeds::add_repeats(state, &job).await?;
             Ok(None)
         }
         (JobState::Succeeded, _) => {

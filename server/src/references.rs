@@ -219,6 +219,7 @@ async fn queue_job(state: &AppState, key: &str, scene: &str, failed_job: Option<
         counts_for_quota: false,
         finished_at: None,
         reference_key: Some(key),
+        more_seeds: None,
     };
     crate::jobs::insert(&mut tx, &job).await?;
     let claimed = match failed_job {

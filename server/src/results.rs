@@ -391,28 +391,20 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
         }
     }
     for run in &new.upload.runs {
-        sqlx::query(
+        let query = sqlx::query(
             "INSERT INTO result_runs (result_id, scene, spp, status, message, technique_ms, render_ms, wall_ms, cpu_ms, \
              peak_memory_bytes, used_samples, metric_values, image, log, repeats) \
              VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)",
         )
         .bind(&id)
         .bind(&run.scene)
-        .bind(run.spp as i64)
-        .bind(run.status.as_str())
-        .bind(&run.message)
-        .bind(run.technique_ms)
-        .bind(run.render_ms)
-        .bind(run.wall_ms)
-        .bind(run.cpu_ms)
-        .bind(run.peak_memory_bytes as i64)
-        .bind(run.used_samples as i64)
-        .bind(serde_json::to_string(&run.metrics).unwrap_or_default())
-        .bind(run.image.as_deref())
-        .bind(Some(run.log.as_str()).filter(|l| !l.is_empty()))
-        .bind((!run.repeats.is_empty()).then(|| serde_json::to_string(&run.repeats).unwrap_or_default()))
-        .execute(&mut **tx)
-        .await?;
+        .bind(run.spp as i64);
+        bind_summary(query, run)
+            .bind(run.image.as_deref())
+            .bind(Some(run.log.as_str()).filter(|l| !l.is_empty()))
+            .bind((!run.repeats.is_empty()).then(|| serde_json::to_string(&run.repeats).unwrap_or_default()))
+            .execute(&mut **tx)
+            .await?;
     }
     for scene in &new.upload.scenes {
         sqlx::query(
@@ -427,6 +419,43 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewResultSe
         .await?;
     }
     Ok(id)
+}
+
+/// `query` with a run's summary bound next: status, message, technique,
+/// render, wall and CPU times, peak memory, samples used and values.
+fn bind_summary<'q>(
+    query: sqlx::query::Query<'q, sqlx::Any, sqlx::any::AnyArguments<'q>>,
+    run: &'q IndexEntry,
+) -> sqlx::query::Query<'q, sqlx::Any, sqlx::any::AnyArguments<'q>> {
+    query
+        .bind(run.status.as_str())
+        .bind(&run.message)
+        .bind(run.technique_ms)
+        .bind(run.render_ms)
+        .bind(run.wall_ms)
+        .bind(run.cpu_ms)
+        .bind(run.peak_memory_bytes as i64)
+        .bind(run.used_samples as i64)
+        .bind(serde_json::to_string(&run.metrics).unwrap_or_default())
+}
+
+/// Stores `run`'s repeats (more seeds, [`crate::seeds`]) and the summary
+/// they make (status, values, times) in place of its row's.
+pub async fn replace_repeats(tx: &mut sqlx::Transaction<'_, sqlx::Any>, run: &StoredRun) -> Result<(), sqlx::Error> {
+    let entry = run.index_entry(&run.result_id);
+    let query = sqlx::query(
+        "UPDATE result_runs SET status = $1, message = $2, technique_ms = $3, render_ms = $4, wall_ms = $5, \
+         cpu_ms = $6, peak_memory_bytes = $7, used_samples = $8, metric_values = $9, repeats = $10 \
+         WHERE result_id = $11 AND scene = $12 AND spp = $13",
+    );
+    bind_summary(query, &entry)
+        .bind(serde_json::to_string(&run.repeats).unwrap_or_default())
+        .bind(&run.result_id)
+        .bind(&run.scene)
+        .bind(run.spp)
+        .execute(&mut **tx)
+        .await?;
+    Ok(())
 }
 
 /// Records that what leaderboards show has changed (every server

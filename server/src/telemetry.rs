@@ -162,7 +162,7 @@ impl Telemetry {
         )
         .fetch_all(&state.pool)
         .await?;
-        for kind in ["build", "benchmark"] {
+        for kind in ["build", "benchmark", "seeds"] {
             self.0.queued.get_or_create(&KindLabels { kind: kind.into() }).set(0);
             self.0.running.get_or_create(&KindLabels { kind: kind.into() }).set(0);
         }

@@ -588,3 +588,124 @@ on_both_databases!(deleting_an_account_deletes_its_projects_and_unpublished_resu
     let board = json_of(get("/api/v1/leaderboard".into()).await.unwrap()).await.1;
     assert_eq!(board["standings"][0]["technique"], "kept");
 });
+
+/// Results of [`common::results_upload`] with a repeat per seed of `seeds`,
+/// each run's MSE moved by `wobble(seed)` (relative). A benchmark's
+/// (`seeds` from 0) keeps the first seed's image; a seeds job's values only.
+fn seeded_upload(seeds: std::ops::Range<u64>, wobble: impl Fn(u64) -> f64) -> Value {
+    let mut upload = common::results_upload(1.0);
+    for run in upload["runs"].as_array_mut().unwrap() {
+        let mse = run["metrics"]["MSE"].as_f64().unwrap();
+        let repeats: Vec<Value> = seeds
+            .clone()
+            .map(|seed| {
+                let value = mse * (1.0 + wobble(seed));
+                json!({
+                    "seed": seed, "status": "ok", "log": "",
+                    "image": if seed == 0 { run["image"].clone() } else { Value::Null },
+                    "technique_ms": 12.5, "render_ms": 100.0, "wall_ms": 120.0, "cpu_ms": 12.5, "waiting_ms": 0.0,
+                    "peak_memory_bytes": 1000, "used_samples": run["used_samples"],
+                    "metrics": { "MSE": value, "SSIM": 1.0 - value }
+                })
+            })
+            .collect();
+        run["repeats"] = Value::Array(repeats);
+        if seeds.start > 0 {
+            run["image"] = Value::Null;
+            run["log"] = json!("");
+        }
+    }
+    upload
+}
+
+/// The next job `runner` is handed (waiting for the server to queue one), as a seeds job.
+async fn seeds_job(runner: &FakeRunner) -> common::HeldJob {
+    let job = runner.claim_with(json!({ "wait_seconds": 20 })).await.expect("a seeds job");
+    assert_eq!(job.body["job"]["kind"], "seeds", "{}", job.body);
+    job
+}
+
+on_both_databases!(a_tie_too_close_to_call_on_the_board_gets_more_seeds_until_it_is_settled, |db: Db| async move {
+    let server = spawn(db).await;
+    let ada = server.user("ada@example.org").await;
+    let runner = FakeRunner::register(&server, "runner").await;
+    // Two techniques whose errors differ by a few per cent, less than
+    // three seeds' spread can show: a tie, which twelve seeds could settle.
+    let wobble = |seed: u64| [0.0, 0.10, -0.10][seed as usize % 3];
+    let gap = |seed: u64| wobble(seed) + [0.03, 0.05, -0.01][seed as usize % 3];
+    let mut sets = Vec::new();
+    for name in ["steady", "shaky"] {
+        queue_benchmark(&server, &ada, name).await;
+        let job = runner.claim(5).await.expect("the benchmark");
+        let upload = if name == "steady" { seeded_upload(0..3, wobble) } else { seeded_upload(0..3, gap) };
+        for scene in ["sin-bands", "defocus-checkerboard"] {
+            common::stored_reference(&runner, scene).await;
+        }
+        for run in upload["runs"].as_array().unwrap() {
+            let name = run["image"].as_str().unwrap();
+            assert_eq!(job.send(&runner, Method::PUT, &format!("files/{name}"), b"png".to_vec().into()).await, 204);
+        }
+        assert_eq!(job.send(&runner, Method::PUT, "results", upload.to_string().into()).await, 204);
+        let (_, done) = job.finish(&runner, json!({ "state": "succeeded" })).await;
+        let id = done["result_id"].as_str().unwrap().to_string();
+        ada.api(Method::POST, format!("{}/api/v1/results/{id}/publish", server.url)).send().await.unwrap();
+        sets.push((name, id));
+    }
+    let board = || {
+        let url = server.url.clone();
+        async move { json_of(reqwest::get(format!("{url}/api/v1/leaderboard")).await.unwrap()).await.1 }
+    };
+    let mean_rank = |board: &Value, id: &str| {
+        board["standings"].as_array().unwrap().iter().find(|s| s["result_id"] == id).unwrap()["mean_rank"].clone()
+    };
+    let before = board().await;
+    assert_eq!(mean_rank(&before, &sets[0].1), 1.5, "a tie on three seeds: {before}");
+    assert_eq!(mean_rank(&before, &sets[1].1), 1.5, "{before}");
+
+    // Round one: both sets' runs behind the tie get seeds 3–5, the same seeds.
+    let mut round = Vec::new();
+    for _ in 0..2 {
+        let job = seeds_job(&runner).await;
+        let runs = job.body["more_seeds"].as_array().unwrap().clone();
+        assert_eq!(runs.len(), 4, "both scenes at both budgets: {}", job.body);
+        assert!(runs.iter().all(|r| r["first"] == 3 && r["end"] == 6), "{}", job.body);
+        round.push(job);
+    }
+    assert!(runner.claim(1).await.is_none(), "one seeds job per set at a time");
+    let id_of = |job: &common::HeldJob| {
+        let project = job.body["job"]["project"].as_str().unwrap().to_string();
+        sets.iter().find(|(name, _)| *name == project).map(|(name, _)| *name).unwrap()
+    };
+    // Repeats that are not what the job asked for are refused, saying why.
+    let wrong = seeded_upload(3..5, wobble).to_string();
+    let answer =
+        runner.job_request(Method::PUT, &round[0].id, &round[0].token, "results").body(wrong).send().await.unwrap();
+    assert_eq!(answer.status(), 400);
+    let text = answer.text().await.unwrap();
+    assert!(text.contains("seeds [3, 4], where the job asked for [3, 4, 5]"), "{text}");
+    for job in &round {
+        let upload = if id_of(job) == "steady" { seeded_upload(3..6, wobble) } else { seeded_upload(3..6, gap) };
+        assert_eq!(job.send(&runner, Method::PUT, "results", upload.to_string().into()).await, 204);
+        let (status, body) = job.finish(&runner, json!({ "state": "succeeded" })).await;
+        assert_eq!(status, 200, "{body}");
+    }
+    // Six seeds still tie; round two doubles them, to the cap of twelve.
+    let second = [seeds_job(&runner).await, seeds_job(&runner).await];
+    for job in &second {
+        assert!(job.body["more_seeds"].as_array().unwrap().iter().all(|r| r["first"] == 6 && r["end"] == 12));
+        let steady = id_of(job) == "steady";
+        let upload =
+            seeded_upload(6..12, |s| if steady { wobble(s) } else { wobble(s) + [0.03, 0.04][s as usize % 2] });
+        assert_eq!(job.send(&runner, Method::PUT, "results", upload.to_string().into()).await, 204);
+        assert_eq!(job.finish(&runner, json!({ "state": "succeeded" })).await.0, 200);
+    }
+    // Twelve seeds tell them apart: the board ranks the shakier one below,
+    // and asks for nothing more.
+    let after = board().await;
+    assert_eq!(mean_rank(&after, &sets[0].1), 1.0, "{after}");
+    assert_eq!(mean_rank(&after, &sets[1].1), 2.0, "{after}");
+    let viewer = viewer_of(&server, &ada, &sets[1].1).await;
+    let run = &technique_in(&viewer, &sets[1].1)["runs"][0];
+    assert_eq!(run["seeds"], 12, "the viewer counts every seed: {run}");
+    assert!(runner.claim(3).await.is_none(), "a settled tie asks for no more seeds");
+});

@@ -41,6 +41,9 @@ pub enum JobKind {
     /// Make a scene's reference and upload it, for every runner to download
     /// ([`ReferenceTask`]).
     Reference,
+    /// Make some runs of a published result set again with more seeds
+    /// ([`MoreSeeds`]): a tie on the board that more seeds could settle.
+    Seeds,
 }
 
 impl JobKind {
@@ -51,12 +54,13 @@ impl JobKind {
             JobKind::Benchmark => "benchmark",
             JobKind::Publish => "publish",
             JobKind::Reference => "reference",
+            JobKind::Seeds => "seeds",
         }
     }
 
     /// The kind named `text`, if any.
     pub fn parse(text: &str) -> Option<JobKind> {
-        [JobKind::Build, JobKind::Benchmark, JobKind::Publish, JobKind::Reference]
+        [JobKind::Build, JobKind::Benchmark, JobKind::Publish, JobKind::Reference, JobKind::Seeds]
             .into_iter()
             .find(|k| k.as_str() == text)
     }
@@ -189,6 +193,32 @@ pub struct Claim {
     /// The reference to make, for a reference job.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference: Option<ReferenceTask>,
+    /// The runs to make again, for a seeds job.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub more_seeds: Vec<MoreSeeds>,
+}
+
+/// A seeds job's run: scene `scene` (its name in the results) at `spp`,
+/// made again with the sample seeds `first..end`. Upload those repeats
+/// only (no files: the set keeps its first seed's image and log), as one
+/// entry per run; the server adds them to the result set.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MoreSeeds {
+    /// Scene, as the result set names it.
+    pub scene: String,
+    /// Budget.
+    pub spp: u64,
+    /// The first seed to make.
+    pub first: u32,
+    /// One past the last seed to make.
+    pub end: u32,
+}
+
+impl MoreSeeds {
+    /// The seeds to make.
+    pub fn seeds(&self) -> std::ops::Range<u32> {
+        self.first..self.end
+    }
 }
 
 /// A reference job's task: make the reference of `key` and upload its

@@ -95,6 +95,7 @@ pub async fn claim(
                 lease_seconds: state.config.lease_seconds,
                 results_url: state.public_url.clone(),
                 reference,
+                more_seeds: job.more_seeds,
             })
             .into_response());
         }
@@ -334,6 +335,10 @@ pub async fn put_results(
         let staging = crate::results::staging_dir(&state.config.data_dir, &job.job_id);
         upload.check(&uploaded_files(&staging)).map_err(|e| ApiError::bad_request("invalid_output", e))?;
         crate::references::check_upload(&state.pool, &upload).await?;
+        let held = crate::jobs::get(&state.pool, &job.job_id).await?;
+        if let Some(seeds) = held.filter(|j| j.kind == crate::jobs::JobKind::Seeds) {
+            crate::seeds::check_upload(&state, &seeds, &upload).await?;
+        }
         crate::jobs::stage_results(&state.pool, &job.job_id, &String::from_utf8_lossy(&body)).await?;
         Ok::<(), ApiError>(())
     }

@@ -1,0 +1,254 @@
+//! More seeds where they decide, on the service.
+//!
+//! A benchmark job measures one technique, so a tie on the board is
+//! between result sets of different jobs. When one of those ties is too
+//! close to call (the rule `fbksd run --max-repeats` uses:
+//! [`fbksd_exchange::ranking::too_close`]), the server queues a *seeds
+//! job* for each published set the tie rests on: its runner builds the
+//! set's commit again and makes only those runs, with the next seeds. The
+//! repeats it uploads are added to the set ([`add_repeats`]), the board
+//! changes, and the planner looks again.
+//!
+//! The rule, written for users in sdk/README ("More seeds on the service"):
+//! - both sides of a tie get the same new seeds (the paired tests pair
+//!   runs by seed), twice as many as the better-seeded side has, up to
+//!   `max_seeds` per run;
+//! - only sets ranked at equal time (published, visible, of the season's
+//!   runner class and calibration) whose project still exists, and runs
+//!   with two seeds or more (one seed has no spread to judge);
+//! - a set waits while a seeds job of its is queued or running, and is
+//!   never planned again after one failed (its owner sees the failure);
+//! - repeats are added only when they are exactly the seeds asked for,
+//!   scored against the set's own references, on the set's runner class.
+
+use crate::error::ServiceError;
+use crate::jobs::{Job, MoreSeeds};
+use crate::results::{ResultSet, StoredRun, Upload};
+use crate::AppState;
+use fbksd_exchange::ranking::{too_close, RunKey};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// The seeds jobs a season's board asks for: per result set, its runs
+/// to make again. A tie waits while either side is in `waiting` (a seeds
+/// job of its is queued or running, or one failed).
+pub fn plan(
+    sets: &[ResultSet],
+    runs: &[StoredRun],
+    class: Option<&str>,
+    max_seeds: u32,
+    waiting: &BTreeSet<String>,
+) -> BTreeMap<String, Vec<MoreSeeds>> {
+    let untimed = crate::leaderboard::untimed_sets(sets, class);
+    let eligible: Vec<ResultSet> = sets
+        .iter()
+        .filter(|s| s.is_public() && s.project_id.is_some() && !untimed.contains_key(s.id.as_str()))
+        .cloned()
+        .collect();
+    let (runs, _) = crate::leaderboard::one_reference_per_scene(&eligible, runs, None);
+    let seeded: Vec<&StoredRun> =
+        runs.into_iter().filter(|r| r.repeats.len() >= 2 && eligible.iter().any(|s| s.id == r.result_id)).collect();
+    let entries: Vec<_> = seeded.iter().map(|r| r.index_entry(&r.result_id)).collect();
+    let have = |key: &RunKey| -> u32 {
+        seeded
+            .iter()
+            .find(|r| r.result_id == key.technique && r.scene == key.scene && r.spp as u64 == key.spp)
+            .map_or(0, |r| seeds_of(r))
+    };
+    let mut wanted: BTreeMap<RunKey, u32> = BTreeMap::new();
+    for tie in too_close(&entries, max_seeds as usize) {
+        if tie.runs.iter().any(|k| waiting.contains(&k.technique)) {
+            continue;
+        }
+        let most = tie.runs.iter().map(&have).max().unwrap_or(0);
+        let target = (2 * most).min(max_seeds);
+        for key in tie.runs {
+            let want = wanted.entry(key).or_default();
+            *want = (*want).max(target);
+        }
+    }
+    let mut plans: BTreeMap<String, Vec<MoreSeeds>> = BTreeMap::new();
+    for (key, target) in wanted {
+        let first = have(&key);
+        if target > first {
+            let run = MoreSeeds { scene: key.scene, spp: key.spp, first, end: target };
+            plans.entry(key.technique).or_default().push(run);
+        }
+    }
+    plans
+}
+
+/// One past a run's highest seed (the seeds it has are 0, 1, …).
+fn seeds_of(run: &StoredRun) -> u32 {
+    run.repeats.iter().map(|r| r.seed as u32 + 1).max().unwrap_or(1)
+}
+
+/// Plans the current season's board if it changed since `planned` (the
+/// board version last planned), queueing its seeds jobs.
+pub async fn plan_if_changed(state: &AppState, planned: &mut Option<i64>) -> Result<(), ServiceError> {
+    let version = state.boards.version(&state.pool).await?;
+    if *planned == Some(version) {
+        return Ok(());
+    }
+    let season = crate::results::current_season(&state.pool).await?;
+    let data = state.boards.season(&state.pool, season).await?;
+    let waiting: BTreeSet<String> = sqlx::query_scalar::<_, Option<String>>(
+        "SELECT DISTINCT more_seeds_of FROM jobs WHERE kind = 'seeds' AND state IN ('queued', 'running', 'failed')",
+    )
+    .fetch_all(&state.pool)
+    .await?
+    .into_iter()
+    .flatten()
+    .collect();
+    let plans = plan(&data.sets, &data.runs, data.runner_class.as_deref(), state.config.max_seeds, &waiting);
+    for (set_id, runs) in plans {
+        let Some(set) = data.sets.iter().find(|s| s.id == set_id) else { continue };
+        queue(state, set, &runs).await?;
+    }
+    *planned = Some(version);
+    Ok(())
+}
+
+/// Queues a seeds job for `set`'s `runs`.
+async fn queue(state: &AppState, set: &ResultSet, runs: &[MoreSeeds]) -> Result<(), ServiceError> {
+    let (Some(project_id), Some(user_id)) = (set.project_id.as_deref(), set.user_id.as_deref()) else {
+        return Ok(());
+    };
+    let (pipeline_id, job_id) = (uuid::Uuid::new_v4().to_string(), uuid::Uuid::new_v4().to_string());
+    let described: Vec<String> =
+        runs.iter().map(|r| format!("{} at {} spp, seeds {}–{}", r.scene, r.spp, r.first, r.end - 1)).collect();
+    let message = format!(
+        "more seeds for result set {}: a tie on the board rests on {} of its runs ({})",
+        set.id,
+        runs.len(),
+        described.join("; ")
+    );
+    let mut tx = state.pool.begin().await?;
+    // Another instance may have planned the same board version.
+    let pending: i64 =
+        sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE more_seeds_of = $1 AND state IN ('queued', 'running')")
+            .bind(&set.id)
+            .fetch_one(&mut *tx)
+            .await?;
+    if pending > 0 {
+        return Ok(());
+    }
+    crate::pipelines::insert_pipeline(
+        &mut tx,
+        &pipeline_id,
+        (project_id, user_id),
+        (&set.commit_sha, "seeds"),
+        "{}",
+        "seeds",
+    )
+    .await?;
+    let job = crate::jobs::NewJob {
+        id: &job_id,
+        pipeline_id: &pipeline_id,
+        project_id,
+        user_id,
+        kind: crate::jobs::JobKind::Seeds,
+        state: crate::jobs::JobState::Queued,
+        failure_reason: None,
+        message: &message,
+        max_attempts: state.config.max_attempts as i64,
+        season: set.season,
+        publish_on_success: false,
+        counts_for_quota: false,
+        finished_at: None,
+        reference_key: None,
+        more_seeds: Some((&set.id, runs)),
+    };
+    crate::jobs::insert(&mut tx, &job).await?;
+    tx.commit().await?;
+    crate::jobs::append_log(&state.pool, &job_id, 0, &format!("[fbksd] queued: {message}\n"), i64::MAX).await?;
+    tracing::info!("{message}");
+    state.job_queued.notify_waiters();
+    Ok(())
+}
+
+/// Whether `upload` is what seeds job `job` asked for: exactly its runs
+/// and seeds, scored against its set's references, on its set's runner
+/// class. Checked when the runner uploads, and again when it is added.
+pub async fn check_upload(state: &AppState, job: &Job, upload: &Upload) -> Result<ResultSet, ServiceError> {
+    let invalid = |message: String| ServiceError::invalid("invalid_output", message);
+    let set_id = job.more_seeds_of.as_deref().ok_or_else(|| ServiceError::internal("a seeds job without its set"))?;
+    let set = crate::results::get(&state.pool, set_id)
+        .await?
+        .ok_or_else(|| ServiceError::conflict("result_gone", format!("result set {set_id} was deleted")))?;
+    let asked: BTreeMap<(&str, u64), &MoreSeeds> =
+        job.more_seeds.iter().map(|r| ((r.scene.as_str(), r.spp), r)).collect();
+    for run in &upload.runs {
+        let at = format!("results: {} at {} spp", run.scene, run.spp);
+        let Some(wanted) = asked.get(&(run.scene.as_str(), run.spp)) else {
+            return Err(invalid(format!("{at}: not one of the runs this seeds job makes")));
+        };
+        let mut seeds: Vec<u64> = run.repeats.iter().map(|r| r.seed).collect();
+        seeds.sort_unstable();
+        let want: Vec<u64> = wanted.seeds().map(u64::from).collect();
+        if seeds != want {
+            return Err(invalid(format!("{at}: seeds {seeds:?}, where the job asked for {want:?}")));
+        }
+        if run.repeats.iter().any(|r| r.image.is_some()) {
+            return Err(invalid(format!("{at}: a seeds job uploads values, not images")));
+        }
+    }
+    if upload.runs.len() != asked.len() {
+        return Err(invalid(format!("results: {} runs, where the job asked for {}", upload.runs.len(), asked.len())));
+    }
+    for scene in &upload.scenes {
+        if let Some(theirs) = crate::results::reference_hash(&state.pool, &set.id, &scene.name).await? {
+            if theirs != scene.reference_hash {
+                return Err(invalid(format!(
+                    "results: scene {} was scored against reference {}, the result set against {theirs}",
+                    scene.name, scene.reference_hash
+                )));
+            }
+        }
+    }
+    let (mine, theirs) = (
+        crate::results::runner_class(&upload.provenance.machine),
+        crate::results::runner_class(&set.provenance["machine"]),
+    );
+    if theirs.is_some() && mine != theirs {
+        return Err(invalid(format!(
+            "results: measured on runner class {}, the result set on {}",
+            mine.unwrap_or("(none)"),
+            theirs.unwrap_or("(none)")
+        )));
+    }
+    Ok(set)
+}
+
+/// Adds the repeats seeds job `job` staged to its result set, and ends
+/// the job. Idempotent: a seed the set already has is not added twice (a
+/// server stopped between the two steps is told the end again).
+pub async fn add_repeats(state: &AppState, job: &Job) -> Result<(), ServiceError> {
+    let (staged, _) = crate::jobs::staged_results(&state.pool, &job.id).await?;
+    let staged = staged.ok_or_else(|| {
+        ServiceError::conflict("no_results", "upload the results (PUT …/results) before reporting success")
+    })?;
+    let upload: Upload = serde_json::from_str(&staged).map_err(ServiceError::internal)?;
+    let set = check_upload(state, job, &upload).await?;
+    let stored = crate::results::runs(&state.pool, crate::results::Selection::One(&set.id)).await?;
+    let mut tx = state.pool.begin().await?;
+    let mut added = 0;
+    for run in &upload.runs {
+        let Some(old) = stored.iter().find(|r| r.scene == run.scene && r.spp as u64 == run.spp) else {
+            continue;
+        };
+        let mut merged = old.clone();
+        for repeat in &run.repeats {
+            if !merged.repeats.iter().any(|r| r.seed == repeat.seed) {
+                merged.repeats.push(repeat.clone());
+                added += 1;
+            }
+        }
+        merged.repeats.sort_by_key(|r| r.seed);
+        crate::results::replace_repeats(&mut tx, &merged).await?;
+    }
+    crate::results::boards_changed(&mut *tx).await?;
+    tx.commit().await?;
+    let message = format!("{added} repeats added to result set {}", set.id);
+    crate::jobs::end(&state.pool, &job.id, crate::jobs::JobState::Succeeded, None, &message, false).await?;
+    Ok(())
+}
