@@ -164,6 +164,7 @@ pub async fn prepare(root: &Path, scenes: &[SceneReference], api: &Api, runner_t
             reference_keys: missing.iter().map(|s| s.key.clone()).collect(),
             references_only: true,
             runner_class: None,
+            more_seeds: false,
         };
         if let Some(claim) = api.claim(runner_token, &request).await? {
             made += 1;

@@ -169,6 +169,7 @@ impl Runner {
                 reference_keys: self.references.iter().map(|s| s.key.clone()).collect(),
                 references_only: false,
                 runner_class: Some(self.ctx.machine.class.clone()),
+                more_seeds: true,
             };
             let claimed = tokio::select! {
                 _ = &mut shutdown => break,

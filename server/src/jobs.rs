@@ -35,7 +35,7 @@ pub struct Job {
     pub project: String,
     /// Who started the pipeline.
     pub user_id: String,
-    /// Build, benchmark or publish.
+    /// Build, benchmark, publish, reference or seeds.
     pub kind: JobKind,
     /// Where it is in its life.
     pub state: JobState,
@@ -182,23 +182,26 @@ pub struct Claimed {
 /// user's job is queued; then the user with the fewest jobs running goes
 /// first, and among those the one whose last job started longest ago
 /// (round robin), so one user's hundred queued jobs do not hold back
-/// another's one; a user's own jobs go oldest first. `held_season`: a
-/// season whose benchmarks this runner is not handed now (its calibration
-/// has drifted from its class's, [`crate::leaderboard::SeasonData::drift_of`]).
+/// another's one; a user's own jobs go oldest first. Seeds jobs go only
+/// to runners that say they take them (`request.more_seeds`).
+/// `held_season`: a season whose benchmarks this runner is not handed now
+/// (its calibration has drifted from its class's,
+/// [`crate::leaderboard::SeasonData::drift_of`]).
 pub async fn claim(
     pool: &AnyPool,
     postgres: bool,
     runner_id: &str,
     lease_ms: i64,
-    runner_class: Option<&str>,
+    request: &fbksd_exchange::runner_api::ClaimRequest,
     held_season: Option<i64>,
 ) -> Result<Option<Claimed>, sqlx::Error> {
+    let runner_class = request.runner_class.as_deref();
     // A season's benchmarks go to runners of the class its times come from
     // (a runner that names none gets them only while the season names none).
     // The held season is a number, never text from a client.
     let pick = format!(
         "SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
-         WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark', 'seeds') \
+         WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark'{}) \
          AND (j.kind = 'build' OR NOT EXISTS (SELECT 1 FROM seasons s WHERE s.number = j.season \
               AND s.runner_class IS NOT NULL AND s.runner_class <> $5)) \
          AND (j.kind = 'build' OR j.season <> {}) \
@@ -206,6 +209,7 @@ pub async fn claim(
          (SELECT COUNT(*) FROM jobs r WHERE r.user_id = j.user_id AND r.state = 'running'), \
          (SELECT COALESCE(MAX(r.started_at), 0) FROM jobs r WHERE r.user_id = j.user_id), \
          j.created_at, j.id LIMIT 1",
+        if request.more_seeds { ", 'seeds'" } else { "" },
         held_season.unwrap_or(-1)
     );
     claim_picked(pool, postgres, runner_id, lease_ms, &pick, &[runner_class.unwrap_or_default().to_string()]).await
@@ -644,12 +648,22 @@ pub async fn succeed_with_results(
     job_id: &str,
     result_id: &str,
 ) -> Result<bool, sqlx::Error> {
+    succeed_in(tx, job_id, &format!("results: /results/{result_id}")).await
+}
+
+/// Ends running job `job_id` as succeeded with `message` inside `tx`, with
+/// what it stored; false if it was no longer running.
+pub async fn succeed_in(
+    tx: &mut sqlx::Transaction<'_, sqlx::Any>,
+    job_id: &str,
+    message: &str,
+) -> Result<bool, sqlx::Error> {
     let ended = sqlx::query(
         "UPDATE jobs SET state = 'succeeded', finished_at = $1, token_hash = NULL, lease_expires_at = NULL, \
          staged_results = NULL, message = $2 WHERE id = $3 AND state = 'running'",
     )
     .bind(now_ms())
-    .bind(format!("results: /results/{result_id}"))
+    .bind(message)
     .bind(job_id)
     .execute(&mut **tx)
     .await?;

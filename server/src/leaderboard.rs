@@ -153,11 +153,12 @@ pub struct SeasonData {
     /// Public boards already assembled, by (sort, tag).
     boards: Mutex<HashMap<BoardKey, Arc<Board>>>,
     /// Private pages' boards already assembled, by (set id, sort, tag): a
-    /// set's runs never change once stored, so a page is assembled once per
-    /// version of the season's data.
+    /// set's runs change only with the board version (more seeds), so a
+    /// page is assembled once per version of the season's data.
     pages: Mutex<HashMap<(String, BoardKey), Arc<Board>>>,
     /// Viewer documents (JSON) already made, by set id: made from this
-    /// version's data and the set's own stored rows, which never change.
+    /// version's data and the set's own stored rows, which change only
+    /// with the board version.
     documents: Mutex<HashMap<String, Arc<tokio::sync::OnceCell<axum::body::Bytes>>>>,
 }
 

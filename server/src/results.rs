@@ -1,5 +1,6 @@
-//! Result sets: what a successful benchmark job uploaded, stored once and
-//! never changed, under a random UUID. Publishing puts a set on its
+//! Result sets: what a successful benchmark job uploaded, stored under a
+//! random UUID and changed only by the repeats a seeds job adds
+//! ([`crate::seeds`], which changes the board version). Publishing puts a set on its
 //! season's leaderboard (one published set per project and season);
 //! unpublishing takes it off; discarding deletes it; an administrator can
 //! hide a set that breaks the rules.

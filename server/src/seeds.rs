@@ -16,8 +16,11 @@
 //! - only sets ranked at equal time (published, visible, of the season's
 //!   runner class and calibration) whose project still exists, and runs
 //!   with two seeds or more (one seed has no spread to judge);
-//! - a set waits while a seeds job of its is queued or running, and is
-//!   never planned again after one failed (its owner sees the failure);
+//! - a tie waits while a seeds job of either side is queued or running,
+//!   and for good once one failed through the technique (its owner sees
+//!   the failure) or was cancelled (an owner or administrator opted out);
+//!   a job that ran out of attempts on the infrastructure is planned
+//!   again at the next board change;
 //! - repeats are added only when they are exactly the seeds asked for,
 //!   scored against the set's own references, on the set's runner class.
 
@@ -30,7 +33,8 @@ use std::collections::{BTreeMap, BTreeSet};
 
 /// The seeds jobs a season's board asks for: per result set, its runs
 /// to make again. A tie waits while either side is in `waiting` (a seeds
-/// job of its is queued or running, or one failed).
+/// job of its is queued or running, or one failed through the technique,
+/// or was cancelled).
 pub fn plan(
     sets: &[ResultSet],
     runs: &[StoredRun],
@@ -39,12 +43,12 @@ pub fn plan(
     waiting: &BTreeSet<String>,
 ) -> BTreeMap<String, Vec<MoreSeeds>> {
     let untimed = crate::leaderboard::untimed_sets(sets, class);
-    let eligible: Vec<ResultSet> = sets
+    let eligible: Vec<&ResultSet> = sets
         .iter()
         .filter(|s| s.is_public() && s.project_id.is_some() && !untimed.contains_key(s.id.as_str()))
-        .cloned()
         .collect();
-    let (runs, _) = crate::leaderboard::one_reference_per_scene(&eligible, runs, None);
+    // The runs the board ranks: scored against each scene's current reference.
+    let (runs, _) = crate::leaderboard::one_reference_per_scene(sets, runs, None);
     let seeded: Vec<&StoredRun> =
         runs.into_iter().filter(|r| r.repeats.len() >= 2 && eligible.iter().any(|s| s.id == r.result_id)).collect();
     let entries: Vec<_> = seeded.iter().map(|r| r.index_entry(&r.result_id)).collect();
@@ -92,7 +96,8 @@ pub async fn plan_if_changed(state: &AppState, planned: &mut Option<i64>) -> Res
     let season = crate::results::current_season(&state.pool).await?;
     let data = state.boards.season(&state.pool, season).await?;
     let waiting: BTreeSet<String> = sqlx::query_scalar::<_, Option<String>>(
-        "SELECT DISTINCT more_seeds_of FROM jobs WHERE kind = 'seeds' AND state IN ('queued', 'running', 'failed')",
+        "SELECT DISTINCT more_seeds_of FROM jobs WHERE kind = 'seeds' \
+         AND (state IN ('queued', 'running', 'cancelled') OR (state = 'failed' AND failure_reason <> 'infrastructure_error'))",
     )
     .fetch_all(&state.pool)
     .await?
@@ -188,8 +193,18 @@ pub async fn check_upload(state: &AppState, job: &Job, upload: &Upload) -> Resul
         if seeds != want {
             return Err(invalid(format!("{at}: seeds {seeds:?}, where the job asked for {want:?}")));
         }
-        if run.repeats.iter().any(|r| r.image.is_some()) {
-            return Err(invalid(format!("{at}: a seeds job uploads values, not images")));
+        if run.repeats.iter().any(|r| r.image.is_some() || !r.log.is_empty()) {
+            return Err(invalid(format!("{at}: a seeds job uploads values, not images or logs")));
+        }
+        let metrics: BTreeSet<&str> = set.metrics.iter().map(|m| m.acronym.as_str()).collect();
+        for repeat in run.repeats.iter().filter(|r| r.status == fbksd_exchange::RunStatus::Ok) {
+            let got: BTreeSet<&str> = repeat.metrics.keys().map(String::as_str).collect();
+            if got != metrics {
+                return Err(invalid(format!(
+                    "{at}: seed {} has the metrics {got:?}, the result set {metrics:?}",
+                    repeat.seed
+                )));
+            }
         }
     }
     if upload.runs.len() != asked.len() {
@@ -247,8 +262,13 @@ pub async fn add_repeats(state: &AppState, job: &Job) -> Result<(), ServiceError
         crate::results::replace_repeats(&mut tx, &merged).await?;
     }
     crate::results::boards_changed(&mut *tx).await?;
-    tx.commit().await?;
+    // With the repeats, so that the planner never sees the new board with
+    // the job still running (it would let the tie wait for no one).
     let message = format!("{added} repeats added to result set {}", set.id);
-    crate::jobs::end(&state.pool, &job.id, crate::jobs::JobState::Succeeded, None, &message, false).await?;
+    if !crate::jobs::succeed_in(&mut tx, &job.id, &message).await? {
+        return Err(ServiceError::gone("job_not_running", "the job is no longer running"));
+    }
+    tx.commit().await?;
+    crate::jobs::append_log(&state.pool, &job.id, 0, "[fbksd] succeeded\n", i64::MAX).await?;
     Ok(())
 }

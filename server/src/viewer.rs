@@ -19,7 +19,8 @@ use std::path::Path;
 
 /// The viewer's document for `set` (which the caller may see), as JSON:
 /// made once per board version. The season's published sets and runs come
-/// from `boards`; `set`'s own rows never change, and its files and
+/// from `boards`; `set`'s own rows change only with the board version
+/// (a seeds job's repeats), and its files and
 /// references are in place once it is stored (a shared reference file that
 /// appears only later, for a set stored before references were kept,
 /// shows from the next board version).

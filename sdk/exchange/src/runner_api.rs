@@ -173,6 +173,11 @@ pub struct ClaimRequest {
     /// a season whose times come from another class is not handed to it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub runner_class: Option<String>,
+    /// Whether it takes seeds jobs ([`JobKind::Seeds`]): runners from
+    /// before them could not read the job, and would hold it until its
+    /// lease ran out.
+    #[serde(default)]
+    pub more_seeds: bool,
 }
 
 /// A claimed job.
@@ -309,7 +314,7 @@ pub struct ClaimedJob {
     pub id: String,
     /// Project (technique) name.
     pub project: String,
-    /// Build or benchmark.
+    /// Build, benchmark, reference or seeds.
     pub kind: JobKind,
     /// Attempt number (1 for the first claim).
     pub attempts: i64,
@@ -634,7 +639,7 @@ mod tests {
             assert_eq!(JobState::parse(s.as_str()), Some(s));
             assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
         }
-        for k in [JobKind::Build, JobKind::Benchmark, JobKind::Publish, JobKind::Reference] {
+        for k in [JobKind::Build, JobKind::Benchmark, JobKind::Publish, JobKind::Reference, JobKind::Seeds] {
             assert_eq!(JobKind::parse(k.as_str()), Some(k));
             assert_eq!(serde_json::to_value(k).unwrap(), k.as_str());
         }

@@ -67,9 +67,7 @@ pub async fn claim(
         let mut claimed =
             crate::jobs::claim_reference(pool, postgres, &runner_id, lease_ms, &request.reference_keys).await?;
         if claimed.is_none() && !request.references_only {
-            claimed =
-                crate::jobs::claim(pool, postgres, &runner_id, lease_ms, request.runner_class.as_deref(), held_season)
-                    .await?;
+            claimed = crate::jobs::claim(pool, postgres, &runner_id, lease_ms, &request, held_season).await?;
         }
         if let Some(claimed) = claimed {
             let job = claimed.job;
