@@ -588,7 +588,8 @@ async fn benchmark(
             name: s.meta.name.clone(),
             renderer_argv: s.renderer_argv(),
             spps: if !seeds.is_empty() {
-                claim.more_seeds.iter().filter(|r| r.scene == path_safe_name(&s.meta.name)).map(|r| r.spp).collect()
+                let scene = path_safe_name(&s.meta.name);
+                seeds.keys().filter(|k| k.scene == scene).map(|k| k.spp).collect()
             } else if ctx.config.spp.is_empty() {
                 s.meta.spp.clone()
             } else {

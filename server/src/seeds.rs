@@ -43,21 +43,21 @@ pub fn plan(
     waiting: &BTreeSet<String>,
 ) -> BTreeMap<String, Vec<MoreSeeds>> {
     let untimed = crate::leaderboard::untimed_sets(sets, class);
-    let eligible: Vec<&ResultSet> = sets
+    let eligible: BTreeSet<&str> = sets
         .iter()
         .filter(|s| s.is_public() && s.project_id.is_some() && !untimed.contains_key(s.id.as_str()))
+        .map(|s| s.id.as_str())
         .collect();
     // The runs the board ranks: scored against each scene's current reference.
     let (runs, _) = crate::leaderboard::one_reference_per_scene(sets, runs, None);
     let seeded: Vec<&StoredRun> =
-        runs.into_iter().filter(|r| r.repeats.len() >= 2 && eligible.iter().any(|s| s.id == r.result_id)).collect();
+        runs.into_iter().filter(|r| r.repeats.len() >= 2 && eligible.contains(r.result_id.as_str())).collect();
     let entries: Vec<_> = seeded.iter().map(|r| r.index_entry(&r.result_id)).collect();
-    let have = |key: &RunKey| -> u32 {
-        seeded
-            .iter()
-            .find(|r| r.result_id == key.technique && r.scene == key.scene && r.spp as u64 == key.spp)
-            .map_or(0, |r| seeds_of(r))
-    };
+    let seeds_by_run: BTreeMap<RunKey, u32> = seeded
+        .iter()
+        .map(|r| (RunKey { technique: r.result_id.clone(), scene: r.scene.clone(), spp: r.spp as u64 }, seeds_of(r)))
+        .collect();
+    let have = |key: &RunKey| seeds_by_run.get(key).copied().unwrap_or(0);
     let mut wanted: BTreeMap<RunKey, u32> = BTreeMap::new();
     for tie in too_close(&entries, max_seeds as usize) {
         if tie.runs.iter().any(|k| waiting.contains(&k.technique)) {
@@ -173,7 +173,8 @@ async fn queue(state: &AppState, set: &ResultSet, runs: &[MoreSeeds]) -> Result<
 
 /// Whether `upload` is what seeds job `job` asked for: exactly its runs
 /// and seeds, scored against its set's references, on its set's runner
-/// class. Checked when the runner uploads, and again when it is added.
+/// class. Checked when the runner uploads (only a checked upload is
+/// staged, as a benchmark's).
 pub async fn check_upload(state: &AppState, job: &Job, upload: &Upload) -> Result<ResultSet, ServiceError> {
     let invalid = |message: String| ServiceError::invalid("invalid_output", message);
     let set_id = job.more_seeds_of.as_deref().ok_or_else(|| ServiceError::internal("a seeds job without its set"))?;
@@ -182,6 +183,7 @@ pub async fn check_upload(state: &AppState, job: &Job, upload: &Upload) -> Resul
         .ok_or_else(|| ServiceError::conflict("result_gone", format!("result set {set_id} was deleted")))?;
     let asked: BTreeMap<(&str, u64), &MoreSeeds> =
         job.more_seeds.iter().map(|r| ((r.scene.as_str(), r.spp), r)).collect();
+    let metrics: BTreeSet<&str> = set.metrics.iter().map(|m| m.acronym.as_str()).collect();
     for run in &upload.runs {
         let at = format!("results: {} at {} spp", run.scene, run.spp);
         let Some(wanted) = asked.get(&(run.scene.as_str(), run.spp)) else {
@@ -196,7 +198,6 @@ pub async fn check_upload(state: &AppState, job: &Job, upload: &Upload) -> Resul
         if run.repeats.iter().any(|r| r.image.is_some() || !r.log.is_empty()) {
             return Err(invalid(format!("{at}: a seeds job uploads values, not images or logs")));
         }
-        let metrics: BTreeSet<&str> = set.metrics.iter().map(|m| m.acronym.as_str()).collect();
         for repeat in run.repeats.iter().filter(|r| r.status == fbksd_exchange::RunStatus::Ok) {
             let got: BTreeSet<&str> = repeat.metrics.keys().map(String::as_str).collect();
             if got != metrics {
@@ -243,7 +244,10 @@ pub async fn add_repeats(state: &AppState, job: &Job) -> Result<(), ServiceError
         ServiceError::conflict("no_results", "upload the results (PUT …/results) before reporting success")
     })?;
     let upload: Upload = serde_json::from_str(&staged).map_err(ServiceError::internal)?;
-    let set = check_upload(state, job, &upload).await?;
+    let set_id = job.more_seeds_of.as_deref().ok_or_else(|| ServiceError::internal("a seeds job without its set"))?;
+    let set = crate::results::get(&state.pool, set_id)
+        .await?
+        .ok_or_else(|| ServiceError::conflict("result_gone", format!("result set {set_id} was deleted")))?;
     let stored = crate::results::runs(&state.pool, crate::results::Selection::One(&set.id)).await?;
     let mut tx = state.pool.begin().await?;
     let mut added = 0;
