@@ -25,16 +25,12 @@ rm -rf "$work"
 mkdir -p "$work/techniques"
 
 # The techniques, as submission repositories.
-for name in box-copy-a box-copy-b box-heavy box-heavy-doubled; do
+. deploy/lib/heavy-box-filter.sh
+for name in box-copy-a box-copy-b; do
     cp -r sdk/techniques/box-filter-cpp "$work/techniques/$name"
 done
-heavy() { # $1 folder, $2 rounds: every sample summed $2 times, each time weighted 1/$2
-    sed -i -e "s|pixel\[0\] += sample\[0\];|for (int r = 0; r < $2; ++r) { pixel[0] += sample[0] * (1.0 / $2); pixel[1] += sample[1] * (1.0 / $2); pixel[2] += sample[2] * (1.0 / $2); }|" \
-        -e '/pixel\[1\] += sample\[1\];/d' -e '/pixel\[2\] += sample\[2\];/d' "$work/techniques/$1/main.cpp"
-    grep -q "r < $2" "$work/techniques/$1/main.cpp" || { echo "bench-runner-classes: could not make $1" >&2; exit 1; }
-}
-heavy box-heavy 30
-heavy box-heavy-doubled 60
+heavy_box_filter "$work/techniques/box-heavy" 30
+heavy_box_filter "$work/techniques/box-heavy-doubled" 60
 cp -r sdk/techniques/gaussian-filter sdk/techniques/nlm "$work/techniques/"
 list="$work/techniques/list.txt"
 printf '%s\n' box-copy-a box-copy-b box-heavy box-heavy-doubled gaussian-filter nlm >"$list"

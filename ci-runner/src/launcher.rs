@@ -96,6 +96,12 @@ impl Launcher for DockerLauncher {
             .handle
             .block_on(sandbox.start(&container))
             .map_err(|e| io::Error::other(format!("cannot start a container of {}: {e}", role.image)))?;
+        // Cancelled while it started: the runner's clean-up may have listed
+        // the job's containers before this one existed.
+        if self.cancelled.load(Ordering::SeqCst) {
+            self.handle.block_on(sandbox.remove(&id));
+            return Err(io::Error::other("the job was cancelled"));
+        }
         let started = Instant::now();
         let (log, max_output) = (spec.log.map(|p| p.to_path_buf()), self.max_output_bytes);
         let running =

@@ -12,7 +12,9 @@
 //!   longer this runner's: its containers are removed and nothing new starts.
 //! - **Clean-up.** After every job, its containers and files are removed;
 //!   at start, whatever a killed predecessor left (containers with this
-//!   runner's label, job directories, rendezvous directories).
+//!   runner's label, job directories, rendezvous directories). A runner
+//!   stopped mid-job (Ctrl-C, TERM) starts nothing more and removes its
+//!   containers before it exits.
 
 use crate::api::{Api, ApiError};
 use crate::calibration::Calibration;
@@ -212,6 +214,10 @@ impl Runner {
         let ctx = &self.ctx;
         let log = JobLog::default();
         let cancelled = Arc::new(AtomicBool::new(false));
+        // Also when this future is dropped (the runner stops mid-job): the
+        // benchmark's thread outlives it, and must not start another
+        // container after the runner has removed its own.
+        let _cancel_on_drop = CancelOnDrop(cancelled.clone());
         let dir = ctx.config.work_dir.join("jobs").join(&claim.job.id);
         tracing::info!("job {} ({} of {}) claimed", claim.job.id, claim.job.kind, claim.job.project);
         let work = async {
@@ -248,6 +254,15 @@ impl Runner {
         if let Err(e) = ctx.api.ready(&self.credentials.token, &record).await {
             tracing::warn!("could not report the new calibration: {e}");
         }
+    }
+}
+
+/// Marks a job cancelled when dropped.
+struct CancelOnDrop(Arc<AtomicBool>);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::SeqCst);
     }
 }
 
