@@ -71,6 +71,12 @@ pub struct Config {
     /// round doubles the seeds of the runs behind the tie up to this; 0:
     /// never ask for more seeds.
     pub max_seeds: u32,
+    /// Whether a runner whose latest calibration lies off its class's
+    /// ([`crate::leaderboard::CALIBRATION_DRIFT_LIMIT`]) is held back from
+    /// the season's benchmarks until it is back. Off only where the
+    /// machine's speed is not what is tested (the runner's end-to-end
+    /// tests, on machines whose speed moves by half for minutes).
+    pub hold_drifted_runners: bool,
     /// Largest log a job may write, in bytes.
     pub max_log_bytes: u64,
     /// Largest upload of one job (results and files together), in bytes.
@@ -226,6 +232,7 @@ impl Default for Config {
             max_attempts: 3,
             long_poll_seconds: 25,
             max_seeds: 12,
+            hold_drifted_runners: true,
             max_log_bytes: 4 << 20,
             max_upload_bytes: 256 << 20,
             max_queued_jobs_per_user: 3,
