@@ -13,8 +13,8 @@
 //! - **Clean-up.** After every job, its containers and files are removed;
 //!   at start, whatever a killed predecessor left (containers with this
 //!   runner's label, job directories, rendezvous directories). A runner
-//!   stopped mid-job (Ctrl-C, TERM) starts nothing more and removes its
-//!   containers before it exits.
+//!   stopped mid-job (Ctrl-C, TERM) cancels the job, so its benchmark
+//!   starts no new run, and removes its containers before it exits.
 
 use crate::api::{Api, ApiError};
 use crate::calibration::Calibration;
