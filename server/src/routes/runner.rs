@@ -60,9 +60,10 @@ pub async fn claim(
     let deadline = Instant::now() + Duration::from_secs(wait);
     let lease_ms = state.config.lease_seconds as i64 * 1000;
     let (pool, postgres) = (&state.pool, state.postgres);
-    let held_season = match state.config.hold_drifted_runners {
-        true => crate::runners::held_season(pool, &state.boards, &runner_id).await?,
-        false => None,
+    let held_season = if state.config.hold_drifted_runners {
+        crate::runners::held_season(pool, &state.boards, &runner_id).await?
+    } else {
+        None
     };
     loop {
         // Expired leases are queued again by the server's sweeper (every second).
