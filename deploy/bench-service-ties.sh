@@ -16,7 +16,8 @@
 # per repetition, the three techniques' mean ranks at equal spp and at
 # equal time, whether the copies tied at both and the doubled one ranked
 # below them at equal time, the seeds jobs of the season (whose runs and
-# what they cost), and the minutes it took; then the counts.
+# what they cost), the scenes the runner measured again because the
+# machine was slow during them, and the minutes it took; then the counts.
 #
 #   [ROUNDS=N] [MAX_SEEDS=M] bash deploy/bench-service-ties.sh [REPETITIONS]   # default 20
 #
@@ -142,8 +143,19 @@ def disturbance(board):
     worst = max((max(m) / min(m) for m in ([statistics.median(v) for v in by_set.values()] for by_set in rates.values())), default=1.0)
     return f"{worst:.2f}×"
 
-print("| repetition | copy a, copy b, doubled at equal spp | at equal time | copies tie at both | doubled below at equal time | renderer rate, slowest set / fastest | seeds jobs | min |")
-print("|---|---|---|---|---|---|---|---|")
+def measured_again(season):
+    """The scenes the runner measured again because its renderer ran
+    markedly slower than its usual there (ci-runner/src/renderer_rates.rs),
+    in the season's jobs, with the slowdown that set each off."""
+    found = []
+    for j in jobs():
+        if j["season"] == season and j["kind"] in ("benchmark", "seeds"):
+            log = "".join(c["text"] for c in call("GET", f"/api/v1/jobs/{j['id']}/log", token=token)[0]["chunks"])
+            found += [f"{j['project']} {m.group(1)} {m.group(2)}×" for m in re.finditer(r"\] (\S+): the renderer ran at ([0-9.]+)×", log)]
+    return ", ".join(found) or "none"
+
+print("| repetition | copy a, copy b, doubled at equal spp | at equal time | copies tie at both | doubled below at equal time | renderer rate, slowest set / fastest | seeds jobs | measured again | min |")
+print("|---|---|---|---|---|---|---|---|---|")
 season = 1
 for repetition in range(1, repetitions + 1):
     started = time.time()
@@ -158,8 +170,8 @@ for repetition in range(1, repetitions + 1):
     tie = spp[0] == spp[1] and at_time[0] == at_time[1]
     below = at_time[2] > max(at_time[0], at_time[1])
     show = lambda r: " / ".join(f"{v:.2f}" for v in r)
-    print(f"| {repetition} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {'yes' if below else 'NO'} | {disturbance(board)} | {seeds_jobs(season)} | {(time.time() - started) / 60:.1f} |", flush=True)
+    print(f"| {repetition} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {'yes' if below else 'NO'} | {disturbance(board)} | {seeds_jobs(season)} | {measured_again(season)} | {(time.time() - started) / 60:.1f} |", flush=True)
 EOF
 echo
-awk -F'|' '/^\| [0-9]/ { n++; if ($5 ~ /yes/) tie++; if ($6 ~ /yes/) below++; if ($8 !~ /none/) seeds++; minutes += $9 }
-    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; seeds jobs in %d of %d; %.1f min per repetition\n", tie, n, below, n, seeds, n, minutes / n }' "$work/table.md"
+awk -F'|' '/^\| [0-9]/ { n++; if ($5 ~ /yes/) tie++; if ($6 ~ /yes/) below++; if ($8 !~ /none/) seeds++; if ($9 !~ /none/) again++; minutes += $10 }
+    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; seeds jobs in %d of %d; scenes measured again in %d of %d; %.1f min per repetition\n", tie, n, below, n, seeds, n, again, n, minutes / n }' "$work/table.md"

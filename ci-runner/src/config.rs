@@ -100,6 +100,18 @@ pub struct RunnerConfig {
     #[arg(long, env = "FBKSD_CI_RUN_TIMEOUT", default_value = "10m", value_parser = humantime::parse_duration)]
     pub run_timeout: Duration,
 
+    /// A scene whose renderer ran this many times slower per sample than
+    /// its usual on this runner (the median of its last jobs) is measured
+    /// again: the machine was slow during those runs, and the technique's
+    /// times with it (see `renderer_rates`).
+    #[arg(long, env = "FBKSD_CI_REMEASURE_ABOVE", default_value_t = 1.2, value_parser = parse_slowdown)]
+    pub remeasure_above: f64,
+
+    /// How many times at most a scene measured while the machine was slow
+    /// is measured again (0: never); the calmest measurement is kept.
+    #[arg(long, env = "FBKSD_CI_MAX_REMEASURES", default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=10))]
+    pub max_remeasures: u32,
+
     /// How long a claim waits for a job before asking again.
     #[arg(long, env = "FBKSD_CI_POLL_SECONDS", default_value_t = 20)]
     pub poll_seconds: u64,
@@ -110,6 +122,14 @@ fn parse_quota(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {
         Ok(cores) if cores.is_finite() && cores >= 0.01 => Ok(cores),
         _ => Err(format!("a CPU quota is a number of cores, 0.01 or more (e.g. 0.5), not {text:?}")),
+    }
+}
+
+/// A slowdown ratio: finite and above 1 (1.2 is 20 % slower).
+fn parse_slowdown(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(ratio) if ratio.is_finite() && ratio > 1.0 => Ok(ratio),
+        _ => Err(format!("a slowdown is a ratio above 1 (1.2 is 20 % slower than usual), not {text:?}")),
     }
 }
 

@@ -23,6 +23,8 @@
 //! - [`sandbox`]: the container limits every piece of user code runs under.
 //! - [`launcher`]: the manager's processes as sandboxed containers.
 //! - [`job`]: one job, from clone to finish, with typed failure reasons.
+//! - [`renderer_rates`]: the renderer's speed as a control inside every job:
+//!   scenes measured while the machine was slow are measured again.
 //! - [`runner`]: registration, the claim loop, heartbeats and clean-up.
 #![deny(missing_docs)]
 
@@ -35,6 +37,7 @@ pub mod launcher;
 pub mod machine;
 pub mod pool;
 pub mod references;
+pub mod renderer_rates;
 pub mod runner;
 pub mod sandbox;
 

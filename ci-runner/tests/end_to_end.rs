@@ -30,7 +30,16 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
     })
     .await;
     let work = tempfile::tempdir().unwrap();
-    let options = RunnerOptions { scenes: CI_SCENES, spp: "1,4", ..Default::default() };
+    // This runner remembers its renderer rendering the sphere far faster
+    // than it can: the first benchmark's sphere runs look made on a slow
+    // machine, and the runner measures them once more.
+    let rates = plant_fast_renderer_rates(&work.path().join("runner"), "sphere", &[1, 4]);
+    let options = RunnerOptions {
+        scenes: CI_SCENES,
+        spp: "1,4",
+        env: vec![("FBKSD_CI_MAX_REMEASURES", "1".into())],
+        ..Default::default()
+    };
     let runner = RunnerProcess::start(&server.url, &work.path().join("runner"), &options);
     let ada = server.user("ada@example.org").await;
     // The Python box filter's images, by (scene, spp), for the 2.x box filters below.
@@ -72,6 +81,27 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
         }
         let private = private_results_url(&log);
         let uuid = private.rsplit('/').next().unwrap().to_string();
+
+        // The sphere was measured again, the scenes the runner had no
+        // history of were not, and the job's own rates joined the history
+        // (removed now: the later jobs are measured once).
+        for line in ["sphere: the renderer ran at ", "sphere measured again (1 of 1)", "sphere: still slow after 2"] {
+            assert!(log.contains(line), "{line:?} is not in the log:\n{log}");
+        }
+        assert!(!log.contains("fireflies measured again"), "{log}");
+        let history: serde_json::Value = serde_json::from_slice(&std::fs::read(&rates).unwrap()).unwrap();
+        for spp in [1, 4] {
+            let entry = history["rates"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|r| r["scene"] == "sphere" && r["spp"] == spp)
+                .unwrap_or_else(|| panic!("no sphere rate at {spp} spp: {history}"));
+            let kept: Vec<f64> = entry["ms_per_sample"].as_array().unwrap().iter().filter_map(|v| v.as_f64()).collect();
+            assert_eq!(kept.len(), 4, "{entry}");
+            assert!(kept[3] > 1000.0 * PLANTED_RATE, "the job's own rate: {entry}");
+        }
+        std::fs::remove_file(&rates).unwrap();
 
         // Metrics for every scene and spp, with provenance.
         let (status, set) =
@@ -250,6 +280,25 @@ async fn box_filters_go_from_push_to_the_leaderboard() {
     assert_eq!(containers_labelled("org.fbksd.ci.runner", &id), Vec::<String>::new());
     let jobs_dir = runner.work.join("jobs");
     assert_eq!(std::fs::read_dir(&jobs_dir).unwrap().count(), 0, "job files left in {}", jobs_dir.display());
+}
+
+/// A renderer rate no machine reaches, in ms of CPU per sample.
+const PLANTED_RATE: f64 = 1e-9;
+
+/// Writes the rates history of a runner (work directory `work`) that
+/// rendered `scene` at each of `spps` for the Python box filter (3 floats
+/// per sample) in three earlier jobs, at [`PLANTED_RATE`]; returns its path.
+fn plant_fast_renderer_rates(work: &std::path::Path, scene: &str, spps: &[u64]) -> std::path::PathBuf {
+    let manifest: serde_json::Value = serde_json::from_slice(&std::fs::read(images()).unwrap()).unwrap();
+    let rates: Vec<_> = spps
+        .iter()
+        .map(|spp| serde_json::json!({"scene": scene, "spp": spp, "floats": 3, "ms_per_sample": vec![PLANTED_RATE; 3]}))
+        .collect();
+    let history = serde_json::json!({"renderer_image": manifest["renderer"], "rates": rates});
+    std::fs::create_dir_all(work).unwrap();
+    let path = work.join(fbksd_ci::renderer_rates::FILE);
+    std::fs::write(&path, history.to_string()).unwrap();
+    path
 }
 
 /// Pushes the Python box filter as `box-filter-twin`, publishes a copy of

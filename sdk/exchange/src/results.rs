@@ -586,6 +586,36 @@ impl ResultsDir {
         }
     }
 
+    /// Replaces every run of `scene` here, with its files and its
+    /// renderer's log, by the runs of `scene` in `other` (a second
+    /// measurement of the same runs, made in a directory of its own): the
+    /// runs of other scenes are not touched. `other` loses what moved.
+    pub fn take_scene(&self, other: &ResultsDir, scene: &str) -> io::Result<()> {
+        let mut index = self.read_index()?;
+        let theirs = other.read_index()?;
+        let techniques: BTreeSet<String> =
+            index.runs.iter().chain(&theirs.runs).filter(|r| r.scene == scene).map(|r| r.technique.clone()).collect();
+        for technique in &techniques {
+            let ours = self.root.join(technique).join(scene);
+            if ours.exists() {
+                std::fs::remove_dir_all(&ours)?;
+            }
+            let moved = other.root.join(technique).join(scene);
+            if moved.exists() {
+                std::fs::create_dir_all(self.root.join(technique))?;
+                std::fs::rename(moved, ours)?;
+            }
+        }
+        let log = other.root.join("renderer-logs").join(format!("{scene}.log"));
+        if log.exists() {
+            std::fs::rename(log, self.renderer_log(scene)?)?;
+        }
+        index.runs.retain(|r| r.scene != scene);
+        index.runs.extend(theirs.runs.into_iter().filter(|r| r.scene == scene));
+        index.rankings = None;
+        self.write_index(index)
+    }
+
     /// Writes the index (sorted by technique, scene and spp).
     pub fn write_index(&self, mut index: ResultsIndex) -> io::Result<()> {
         index.runs.sort_by(|a, b| (&a.technique, &a.scene, a.spp).cmp(&(&b.technique, &b.scene, b.spp)));
@@ -619,5 +649,66 @@ mod tests {
         assert_eq!(path_safe_name("box filter/v2"), "box_filter_v2");
         assert_eq!(path_safe_name(".."), "unnamed");
         assert_eq!(path_safe_name("ok-1.2_x"), "ok-1.2_x");
+    }
+
+    /// Records repeat `repeat` of a run with its log file, as a benchmark does.
+    fn record(results: &ResultsDir, scene: &str, spp: u64, repeat: u32, technique_ms: f64) {
+        let record = RunRecord {
+            date: String::new(),
+            spp_budget: spp,
+            samples_budget: spp * 4,
+            used_samples: spp * 4,
+            sample_floats: 3,
+            aborted: false,
+            exec_time: technique_ms,
+            status: RunStatus::Ok,
+            message: String::new(),
+            scene: scene.into(),
+            technique: "box".into(),
+            width: 2,
+            height: 2,
+            times: crate::record::Times { technique_ms, ..Default::default() },
+            peak_memory_bytes: 1,
+            requests: 1,
+            image: None,
+            technique_log: RunFiles { spp, repeat }.technique_log(),
+            seed: repeat as u64,
+            repeat,
+        };
+        let log = results.run_dir("box", scene).unwrap().join(RunFiles { spp, repeat }.log());
+        write_json_atomically(&log, &record).unwrap();
+        std::fs::write(results.renderer_log(scene).unwrap(), format!("{scene} rendered {technique_ms}")).unwrap();
+        results.record(&record, &log, None).unwrap();
+    }
+
+    #[test]
+    fn a_scene_measured_again_replaces_that_scene_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let first = ResultsDir::create(&dir.path().join("results")).unwrap();
+        let again = ResultsDir::create(&dir.path().join("again")).unwrap();
+        for repeat in 0..2 {
+            record(&first, "sphere", 4, repeat, 30.0);
+            record(&first, "sin-bands", 4, repeat, 10.0);
+            record(&again, "sphere", 4, repeat, 20.0);
+        }
+        first.take_scene(&again, "sphere").unwrap();
+
+        let index = first.read_index().unwrap();
+        let times = |scene: &str| -> Vec<f64> {
+            let run = index.runs.iter().find(|r| r.scene == scene).unwrap();
+            run.repeats.iter().map(|r| r.technique_ms).collect()
+        };
+        assert_eq!(times("sphere"), [20.0, 20.0]);
+        assert_eq!(times("sin-bands"), [10.0, 10.0]);
+        assert_eq!(index.runs.len(), 2);
+        // The files moved with the entries: each repeat's log is the second measurement's.
+        for repeat in &index.runs.iter().find(|r| r.scene == "sphere").unwrap().repeats {
+            let log: RunRecord =
+                serde_json::from_slice(&std::fs::read(first.root().join(&repeat.log)).unwrap()).unwrap();
+            assert_eq!(log.times.technique_ms, 20.0);
+        }
+        let renderer_log = std::fs::read_to_string(first.renderer_log("sphere").unwrap()).unwrap();
+        assert_eq!(renderer_log, "sphere rendered 20");
+        assert!(!again.root().join("box").join("sphere").exists());
     }
 }
