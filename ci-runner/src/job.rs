@@ -219,6 +219,11 @@ pub struct JobContext {
     pub runner: (String, String),
     /// Where rendezvous directories go.
     pub rendezvous_parent: PathBuf,
+    /// Held by a benchmark's thread while it runs. The thread outlives a
+    /// job whose work was dropped (the runner stopped mid-job): the runner
+    /// waits for this before its last clean-up, so that no container the
+    /// thread started in the meantime is left.
+    pub benchmark_thread: Arc<tokio::sync::Semaphore>,
 }
 
 /// Set when the job is no longer this runner's: no new container starts.
@@ -641,7 +646,7 @@ async fn benchmark(
         launcher: Arc::new(launcher),
         repeats: ctx.config.repeats,
     };
-    let (records, runs_time) = measure(&bench, &seeds, log, "").await?;
+    let (records, runs_time) = measure(ctx, &bench, &seeds, log, "").await?;
     if cancelled.load(Ordering::SeqCst) {
         return Err(Failure::infrastructure("the job was cancelled"));
     }
@@ -673,13 +678,21 @@ type SeedsOf = std::collections::BTreeMap<RunKey, std::ops::Range<u32>>;
 /// logging each as it ends (`label` says which measurement); returns the
 /// records and the runs' own time (technique start to result, summed).
 async fn measure(
+    ctx: &JobContext,
     bench: &Benchmark,
     seeds: &SeedsOf,
     log: &JobLog,
     label: &'static str,
 ) -> Result<(Vec<RunRecord>, Duration), Failure> {
     let (bench, seeds, log) = (bench.clone(), seeds.clone(), log.clone());
+    let running = ctx
+        .benchmark_thread
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(|_| Failure::infrastructure("the runner is stopping"))?;
     let records = tokio::task::spawn_blocking(move || {
+        let _running = running;
         let progress = |p: Progress<'_>| {
             if let Progress::RunFinished(r) = p {
                 let how = if r.status == RunStatus::Ok {
@@ -740,7 +753,7 @@ async fn measure_slow_scenes_again(
         for attempt in 1..=ctx.config.max_remeasures {
             let again = bench.results.with_file_name(format!("again-{scene}-{attempt}"));
             let single = Benchmark { scenes: vec![spec.clone()], results: again.clone(), ..bench.clone() };
-            let (new, took) = measure(&single, seeds, log, "again: ").await?;
+            let (new, took) = measure(ctx, &single, seeds, log, "again: ").await?;
             time += took;
             if cancelled.load(Ordering::SeqCst) {
                 return Err(Failure::infrastructure("the job was cancelled"));

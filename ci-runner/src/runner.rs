@@ -14,7 +14,8 @@
 //!   at start, whatever a killed predecessor left (containers with this
 //!   runner's label, job directories, rendezvous directories). A runner
 //!   stopped mid-job (Ctrl-C, TERM) cancels the job, so its benchmark
-//!   starts no new run, and removes its containers before it exits.
+//!   starts no new run, removes its containers, and waits for the
+//!   benchmark's thread to end before a last removal, so none is left.
 
 use crate::api::{Api, ApiError};
 use crate::calibration::Calibration;
@@ -144,6 +145,7 @@ impl Runner {
                 scenes,
                 runner,
                 rendezvous_parent,
+                benchmark_thread: Arc::new(tokio::sync::Semaphore::new(1)),
             },
             credentials,
             references,
@@ -205,7 +207,16 @@ impl Runner {
                 }
             }
         }
-        let removed = self.ctx.sandbox.remove_runner_containers().await;
+        // Stopped mid-job, the job's benchmark thread still runs: removing
+        // the containers ends its run, the next finds the job cancelled and
+        // starts nothing, and the thread ends. One that started a container
+        // in between removes it itself, or the second pass does.
+        let mut removed = self.ctx.sandbox.remove_runner_containers().await;
+        let ended = tokio::time::timeout(Duration::from_secs(60), self.ctx.benchmark_thread.acquire()).await;
+        if ended.is_err() {
+            tracing::warn!("the benchmark's thread did not end within 60 s of the stop");
+        }
+        removed += self.ctx.sandbox.remove_runner_containers().await;
         tracing::info!("runner stopped ({removed} containers removed)");
     }
 

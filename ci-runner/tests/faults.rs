@@ -1,6 +1,7 @@
-//! Faults: a runner killed mid-job, the server restarted mid-job, Docker
-//! unavailable, a runner kept beside a server started afresh. In each, no
-//! job and no result is lost.
+//! Faults: a runner killed mid-job, a runner stopped mid-job, the server
+//! restarted mid-job, Docker unavailable, a runner kept beside a server
+//! started afresh. In each, no job and no result is lost, and no container
+//! is left behind.
 
 mod common;
 
@@ -42,7 +43,7 @@ async fn a_runner_killed_mid_job_loses_its_lease_and_another_completes_the_job()
 
     let mut first = RunnerProcess::start(&server.url, &work.path().join("first"), &RunnerOptions::default());
     first.wait_for_output("build succeeded", Duration::from_secs(300));
-    std::thread::sleep(Duration::from_millis(1500)); // inside the technique's run
+    wait_for_running_container(&id, Duration::from_secs(120));
     let first_id = first.id().unwrap();
     first.kill();
 
@@ -59,6 +60,32 @@ async fn a_runner_killed_mid_job_loses_its_lease_and_another_completes_the_job()
     again.wait_for_output("ready", Duration::from_secs(60));
     assert_eq!(again.id().as_deref(), Some(first_id.as_str()));
     assert_eq!(containers_labelled("org.fbksd.ci.runner", &first_id), Vec::<String>::new());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_runner_stopped_mid_job_starts_nothing_more_and_leaves_no_container() {
+    images();
+    references(&["experimental/fireflies"]);
+    let server = spawn(Db::Sqlite).await;
+    let ada = server.user("ada@example.org").await;
+    let work = tempfile::tempdir().unwrap();
+    let repo = slow_box_filter(2);
+    let id = start_benchmark(&server, &ada, "stopped-filter", repo.path()).await;
+    // Two budgets of three seeds: once its containers are gone, the
+    // benchmark's thread would go on to the next run.
+    let options = RunnerOptions { spp: "1,4", ..RunnerOptions::default() };
+    let mut runner = RunnerProcess::start(&server.url, &work.path().join("runner"), &options);
+    runner.wait_for_output("build succeeded", Duration::from_secs(300));
+    wait_for_running_container(&id, Duration::from_secs(120));
+    let runner_id = runner.id().unwrap();
+
+    let status = runner.interrupt(Duration::from_secs(120));
+    let output = runner.output();
+    assert!(status.success(), "{status}\n{output}");
+    assert!(output.contains("runner stopped"), "{output}");
+    // Nothing of the job is left, running or exited, once the runner has gone.
+    assert_eq!(containers_labelled("org.fbksd.ci.runner", &runner_id), Vec::<String>::new(), "{output}");
+    assert_eq!(containers_labelled("org.fbksd.ci.job", &id), Vec::<String>::new(), "{output}");
 }
 
 /// The real `fbksd-server` binary, as a process (killed when dropped).

@@ -179,6 +179,25 @@ impl RunnerProcess {
         }
     }
 
+    /// Stops it as Ctrl-C does (SIGINT), and waits until it has exited.
+    pub fn interrupt(&mut self, within: Duration) -> std::process::ExitStatus {
+        let mut child = self.child.take().expect("the runner runs");
+        // SAFETY: a signal to our own child, which has not been reaped.
+        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) }, 0);
+        let deadline = Instant::now() + within;
+        loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                return status;
+            }
+            if Instant::now() >= deadline {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("the runner did not stop within {within:?} of Ctrl-C:\n{}", self.output());
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
     /// Its id on the server, once registered.
     pub fn id(&self) -> Option<String> {
         let text = std::fs::read_to_string(self.work.join("runner.json")).ok()?;
@@ -207,6 +226,23 @@ pub fn containers_labelled(label: &str, value: &str) -> Vec<String> {
         .output()
         .expect("docker runs");
     String::from_utf8_lossy(&out.stdout).lines().map(str::to_string).collect()
+}
+
+/// Waits until a container of job `id` is running (a benchmark's renderer
+/// or technique, once the build has succeeded).
+pub fn wait_for_running_container(id: &str, within: Duration) {
+    let deadline = Instant::now() + within;
+    loop {
+        let out = Command::new("docker")
+            .args(["ps", "-q", "--filter", &format!("label=org.fbksd.ci.job={id}"), "--filter", "status=running"])
+            .output()
+            .expect("docker runs");
+        if !out.stdout.is_empty() {
+            return;
+        }
+        assert!(Instant::now() < deadline, "no container of job {id} ran within {within:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
 }
 
 /// A job as the API shows it.
