@@ -77,6 +77,14 @@ pub struct Config {
     /// machine's speed is not what is tested (the runner's end-to-end
     /// tests, on machines whose speed moves by half for minutes).
     pub hold_drifted_runners: bool,
+    /// How long at most a season's benchmark waits for runners held back
+    /// for their calibration, in minutes: after that a held runner takes it
+    /// (and the drift rule ranks its set at equal spp only if its
+    /// calibration still lies off its class's). The class's calibration is
+    /// the median of the season's published sets, so without a bound a
+    /// season whose first sets were measured during a slow spell held its
+    /// only runner back for good once the spell was over.
+    pub max_drift_hold_minutes: u64,
     /// Largest log a job may write, in bytes.
     pub max_log_bytes: u64,
     /// Largest upload of one job (results and files together), in bytes.
@@ -233,6 +241,7 @@ impl Default for Config {
             long_poll_seconds: 25,
             max_seeds: 12,
             hold_drifted_runners: true,
+            max_drift_hold_minutes: 15,
             max_log_bytes: 4 << 20,
             max_upload_bytes: 256 << 20,
             max_queued_jobs_per_user: 3,

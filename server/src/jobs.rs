@@ -177,6 +177,16 @@ pub struct Claimed {
     pub token: String,
 }
 
+/// The benchmarks a runner is held back from: its season's, but those
+/// queued before a time (they have waited long enough).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Held {
+    /// The season.
+    pub season: i64,
+    /// Jobs queued before this (ms since the epoch) are handed anyway.
+    pub unless_queued_before_ms: i64,
+}
+
 /// Hands a queued build or benchmark job to `runner_id`, if any, fairly
 /// between users: a service account's jobs (the baselines) wait while a
 /// user's job is queued; then the user with the fewest jobs running goes
@@ -184,33 +194,33 @@ pub struct Claimed {
 /// (round robin), so one user's hundred queued jobs do not hold back
 /// another's one; a user's own jobs go oldest first. Seeds jobs go only
 /// to runners that say they take them (`request.more_seeds`).
-/// `held_season`: a season whose benchmarks this runner is not handed now
-/// (its calibration has drifted from its class's,
-/// [`crate::leaderboard::SeasonData::drift_of`]).
+/// `held`: the benchmarks this runner is not handed now (its calibration
+/// has drifted from its class's, [`crate::leaderboard::SeasonData::drift_of`]).
 pub async fn claim(
     pool: &AnyPool,
     postgres: bool,
     runner_id: &str,
     lease_ms: i64,
     request: &fbksd_exchange::runner_api::ClaimRequest,
-    held_season: Option<i64>,
+    held: Option<Held>,
 ) -> Result<Option<Claimed>, sqlx::Error> {
     let runner_class = request.runner_class.as_deref();
     // A season's benchmarks go to runners of the class its times come from
     // (a runner that names none gets them only while the season names none).
-    // The held season is a number, never text from a client.
+    // The held season and time are numbers, never text from a client.
     let pick = format!(
         "SELECT j.id FROM jobs j JOIN users u ON u.id = j.user_id \
          WHERE j.state = 'queued' AND j.kind IN ('build', 'benchmark'{}) \
          AND (j.kind = 'build' OR NOT EXISTS (SELECT 1 FROM seasons s WHERE s.number = j.season \
               AND s.runner_class IS NOT NULL AND s.runner_class <> $5)) \
-         AND (j.kind = 'build' OR j.season <> {}) \
+         AND (j.kind = 'build' OR j.season <> {} OR j.created_at < {}) \
          ORDER BY u.is_service, \
          (SELECT COUNT(*) FROM jobs r WHERE r.user_id = j.user_id AND r.state = 'running'), \
          (SELECT COALESCE(MAX(r.started_at), 0) FROM jobs r WHERE r.user_id = j.user_id), \
          j.created_at, j.id LIMIT 1",
         if request.more_seeds { ", 'seeds'" } else { "" },
-        held_season.unwrap_or(-1)
+        held.map_or(-1, |h| h.season),
+        held.map_or(0, |h| h.unless_queued_before_ms),
     );
     claim_picked(pool, postgres, runner_id, lease_ms, &pick, &[runner_class.unwrap_or_default().to_string()]).await
 }

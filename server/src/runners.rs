@@ -161,7 +161,8 @@ pub async fn set_machine(pool: &AnyPool, runner_id: &str, machine: &serde_json::
 /// sent after each calibration) lies beyond the drift limit from its
 /// class's there. Its times would not compare with the board's; it still
 /// builds and makes references, and takes the benchmarks again once a
-/// calibration is back within the limit.
+/// calibration is back within the limit, or those that have waited longer
+/// than `max_drift_hold_minutes` (the claim route's bound).
 pub async fn held_season(
     pool: &AnyPool,
     boards: &crate::leaderboard::BoardCache,

@@ -530,6 +530,21 @@ on_both_databases!(
         assert_eq!(status, 204);
         queue("waiting").await;
         assert!(claim_as(&runner, CLASS).await.is_none(), "held back while its calibration is off");
+        // A benchmark that has waited longer than the hold goes to it anyway:
+        // a season must not wait for good on a calibration that will not come back.
+        let pool = fbksd_server::db::connect(&server.config().database_url()).await.unwrap();
+        let waited = fbksd_server::now_ms() - 16 * 60_000;
+        sqlx::query("UPDATE jobs SET created_at = $1 WHERE state = 'queued'")
+            .bind(waited)
+            .execute(&pool)
+            .await
+            .unwrap();
+        let job = claim_as(&runner, CLASS).await.expect("a benchmark waits 15 minutes at most");
+        assert_eq!(job.body["job"]["kind"], "benchmark");
+        let (status, _) = job.finish(&runner, json!({ "state": "failed", "reason": "crashed", "message": "x" })).await;
+        assert_eq!(status, 200);
+        queue("waiting-again").await;
+        assert!(claim_as(&runner, CLASS).await.is_none(), "a new benchmark waits again");
         let page = admin.browser.get(format!("{}/admin", server.url)).send().await.unwrap().text().await.unwrap();
         assert!(
             page.contains("held back from season 1&#39;s benchmarks: its calibration is off its class&#39;s (45.0 ms against 40.4 ms, +11 %)"),

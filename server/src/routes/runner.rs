@@ -60,8 +60,11 @@ pub async fn claim(
     let deadline = Instant::now() + Duration::from_secs(wait);
     let lease_ms = state.config.lease_seconds as i64 * 1000;
     let (pool, postgres) = (&state.pool, state.postgres);
-    let held_season = if state.config.hold_drifted_runners {
-        crate::runners::held_season(pool, &state.boards, &runner_id).await?
+    let held = if state.config.hold_drifted_runners {
+        let waited_ms = state.config.max_drift_hold_minutes as i64 * 60_000;
+        crate::runners::held_season(pool, &state.boards, &runner_id)
+            .await?
+            .map(|season| crate::jobs::Held { season, unless_queued_before_ms: crate::now_ms() - waited_ms })
     } else {
         None
     };
@@ -71,7 +74,7 @@ pub async fn claim(
         let mut claimed =
             crate::jobs::claim_reference(pool, postgres, &runner_id, lease_ms, &request.reference_keys).await?;
         if claimed.is_none() && !request.references_only {
-            claimed = crate::jobs::claim(pool, postgres, &runner_id, lease_ms, &request, held_season).await?;
+            claimed = crate::jobs::claim(pool, postgres, &runner_id, lease_ms, &request, held).await?;
         }
         if let Some(claimed) = claimed {
             let job = claimed.job;
