@@ -15,7 +15,8 @@
 # ties, max_seeds 12 by default: MAX_SEEDS=0 turns them off). It prints,
 # per repetition, the three techniques' mean ranks at equal spp and at
 # equal time, whether the copies tied at both and the doubled one ranked
-# below them at equal time, the seeds jobs of the season (whose runs and
+# below them at equal time ("–": a set left out of equal time for its
+# calibration), the seeds jobs of the season (whose runs and
 # what they cost), the scenes the runner measured again because the
 # machine was slow during them, and the minutes it took; then the counts.
 #
@@ -167,9 +168,12 @@ for repetition in range(1, repetitions + 1):
     ranks = {s["technique"]: (s["mean_rank"], s["mean_rank_time"]) for s in board["standings"]}
     spp = [ranks[n][0] for n in names]
     at_time = [ranks[n][1] for n in names]
-    tie = spp[0] == spp[1] and at_time[0] == at_time[1]
-    below = at_time[2] > max(at_time[0], at_time[1])
-    show = lambda r: " / ".join(f"{v:.2f}" for v in r)
+    # A set measured while its runner's calibration lay off its class's is
+    # ranked at equal spp only (no rank at equal time, shown "–"): a miss.
+    timed = None not in at_time
+    tie = spp[0] == spp[1] and timed and at_time[0] == at_time[1]
+    below = timed and at_time[2] > max(at_time[0], at_time[1])
+    show = lambda r: " / ".join("–" if v is None else f"{v:.2f}" for v in r)
     print(f"| {repetition} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {'yes' if below else 'NO'} | {disturbance(board)} | {seeds_jobs(season)} | {measured_again(season)} | {(time.time() - started) / 60:.1f} |", flush=True)
 EOF
 echo

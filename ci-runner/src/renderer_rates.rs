@@ -82,11 +82,11 @@ impl std::fmt::Display for Slowdown {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{:.2}× its usual at {} spp ({:.4} against {:.4} ms of CPU per sample)",
+            "{:.2}× its usual at {} spp ({:.3} against {:.3} µs of CPU per sample)",
             self.ratio(),
             self.key.spp,
-            self.rate,
-            self.usual
+            1e3 * self.rate,
+            1e3 * self.usual
         )
     }
 }
@@ -267,7 +267,7 @@ mod tests {
         let slow = history.slowest(&measured).unwrap();
         assert_eq!(slow.key, key("sphere", 16, 3));
         assert!((slow.ratio() - 1.5).abs() < 1e-12);
-        assert_eq!(slow.to_string(), "1.50× its usual at 16 spp (0.1200 against 0.0800 ms of CPU per sample)");
+        assert_eq!(slow.to_string(), "1.50× its usual at 16 spp (120.000 against 80.000 µs of CPU per sample)");
     }
 
     #[test]
