@@ -66,6 +66,10 @@ export FBKSD_COMPOSE_RUNNER_ROOT=$work/runners FBKSD_COMPOSE_RUNTIME_ROOT=$runti
 export FBKSD_CI_SCENES=experimental/sphere FBKSD_CI_SPP=1,4 FBKSD_CI_REPEATS=1 FBKSD_CI_POLL_SECONDS=5
 export FBKSD_CI_RUN_TIMEOUT=120s FBKSD_CI_BUILD_TIMEOUT=300s
 export FBKSD_SERVER_LEASE_SECONDS=10 FBKSD_SERVER_MAX_RUNS_PER_DAY=100 FBKSD_SERVER_MAX_QUEUED_JOBS_PER_USER=10
+# The two runners share this machine's cores, so one calibrates while the
+# other's job runs, and the drift hold (tested in the server's rules) then
+# kept the stopped runner's job from the other past this check's 60 s.
+export FBKSD_SERVER_HOLD_DRIFTED_RUNNERS=false
 export RUST_LOG=info
 dc() { docker-compose --ansi never -p "$project" -f "$repo_root/deploy/compose.yaml" --env-file "$work/images.env" "$@"; }
 
