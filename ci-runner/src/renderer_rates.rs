@@ -138,8 +138,12 @@ impl RateHistory {
         fbksd_exchange::results::write_json_atomically(path, self)
     }
 
+    fn position(&self, key: &RateKey) -> Option<usize> {
+        self.rates.iter().position(|r| r.scene == key.scene && r.spp == key.spp && r.floats == key.floats)
+    }
+
     fn entry(&self, key: &RateKey) -> Option<&Rates> {
-        self.rates.iter().find(|r| r.scene == key.scene && r.spp == key.spp && r.floats == key.floats)
+        self.position(key).map(|i| &self.rates[i])
     }
 
     /// The usual rate: the median of the last jobs', once there are [`MIN_JOBS`].
@@ -151,11 +155,7 @@ impl RateHistory {
     /// Adds one job's rates, keeping the last [`KEPT`] of each.
     pub fn add(&mut self, rates: &BTreeMap<RateKey, f64>) {
         for (key, &rate) in rates {
-            let i = match self
-                .rates
-                .iter()
-                .position(|r| r.scene == key.scene && r.spp == key.spp && r.floats == key.floats)
-            {
+            let i = match self.position(key) {
                 Some(i) => i,
                 None => {
                     self.rates.push(Rates {
