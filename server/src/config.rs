@@ -94,6 +94,11 @@ pub struct Config {
     /// Projects one account may own (each is a repository on disk and a
     /// row in every list): past it, creating one is refused.
     pub max_projects_per_user: u64,
+    /// MiB the repositories of one account's projects may hold on disk
+    /// together: a push that would take them past it is refused, nothing
+    /// written. Projects bound the count, this the size (each project
+    /// could otherwise grow by `max_push_bytes` per push, for ever).
+    pub max_repository_mib_per_user: u64,
     /// Benchmark runs a user may request per 24 hours; infrastructure
     /// failures and runs cancelled before they started do not count.
     pub max_runs_per_day: u64,
@@ -247,6 +252,7 @@ impl Default for Config {
             max_queued_jobs_per_user: 3,
             max_runs_per_day: 10,
             max_projects_per_user: 100,
+            max_repository_mib_per_user: 2048,
             login_limit_per_address: RateLimit::new(10, Duration::from_secs(15 * 60)),
             login_limit_per_ip: RateLimit::new(30, Duration::from_secs(60)),
             mail_limit_per_address: RateLimit::new(5, Duration::from_secs(3600)),

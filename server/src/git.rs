@@ -18,7 +18,11 @@
 //!
 //! Size: git itself refuses packs above `receive.maxInputSize` with a
 //! message the client prints; the bridge also caps the request body, which
-//! it spools to disk rather than holding in memory.
+//! it spools to disk rather than holding in memory. What an account's
+//! repositories hold together is bounded too ([`RepositoryQuota`]): the
+//! bridge tells `pre-receive` how much they hold, and the hook weighs what
+//! the push brings (git keeps it in a quarantine until the hooks accept it,
+//! so a refused push writes nothing).
 //!
 //! Processes: clients are served by at most [`MAX_SERVED`] git processes at
 //! once, each caller (a user, a job, or all anonymous clients together) by
@@ -175,6 +179,21 @@ pub struct GitRequest<'a> {
     /// Who asks, as counted against [`MAX_REQUESTS_PER_CALLER`]: a user's
     /// or a job's own key, or [`ANONYMOUS`].
     pub caller: &'a str,
+    /// For a push: what the repository's owner may keep, checked by
+    /// `pre-receive` against what the push brings.
+    pub quota: Option<RepositoryQuota>,
+}
+
+/// What one account's repositories hold on disk together, and the most
+/// they may. Checked per push, so two pushes of one account at the same
+/// moment may each fit alone and pass it together by at most one push
+/// (`max_push_bytes`, times the caller's [`MAX_REQUESTS_PER_CALLER`]).
+#[derive(Debug, Clone, Copy)]
+pub struct RepositoryQuota {
+    /// Bytes of the files of the account's repositories now.
+    pub used_bytes: u64,
+    /// The most they may hold.
+    pub max_bytes: u64,
 }
 
 /// The caller that all anonymous clients are together.
@@ -425,6 +444,13 @@ impl GitHost {
         self.root.join(format!("{project_id}.git"))
     }
 
+    /// Bytes the files of these projects' repositories hold on disk.
+    pub async fn repositories_bytes(&self, project_ids: Vec<String>) -> u64 {
+        let roots: Vec<PathBuf> = project_ids.iter().map(|id| self.repository(id)).collect();
+        let walk = move || roots.iter().map(|root| files_bytes(root)).sum();
+        tokio::task::spawn_blocking(walk).await.unwrap_or(0)
+    }
+
     /// Runs git with at most [`MAX_READS`] at once, reading at most
     /// `limit` of its output within [`GIT_TIME_LIMIT`]. Output is
     /// streamed and git is killed at the cap: a repository's content decides
@@ -595,7 +621,7 @@ impl GitHost {
     /// Answers one smart-HTTP request for a project's repository with
     /// `git http-backend`; `user` is who authenticated (for git's logs).
     pub async fn serve(&self, project_id: &str, request: GitRequest<'_>, body: Body, user: &str) -> Served {
-        let GitRequest { method, rest, query, headers, caller } = request;
+        let GitRequest { method, rest, query, headers, caller, quota } = request;
         let plain = |status: StatusCode, text: String| Served::Answered((status, text).into_response());
         // Taken before the body is spooled: a caller's spooled bodies are bounded too.
         let Ok(slot) = self.callers.take(caller) else {
@@ -665,6 +691,11 @@ impl GitHost {
             .kill_on_drop(true);
         if let Some(record) = &record {
             command.env("FBKSD_PUSH_RECORD", record.path());
+        }
+        if let Some(quota) = quota.filter(|_| is_push) {
+            command
+                .env("FBKSD_REPOSITORIES_BYTES", quota.used_bytes.to_string())
+                .env("FBKSD_MAX_REPOSITORIES_BYTES", quota.max_bytes.to_string());
         }
         // Held until git ends: for a fetch, by the task that waits for it.
         let Ok(permit) = self.serving.clone().acquire_owned().await else {
@@ -840,6 +871,24 @@ async fn spool(body: Body, dir: &Path, cap: u64) -> Result<Spooled, Spool> {
     }
     out.flush().await.map_err(Spool::Disk)?;
     Ok(Spooled { file, length })
+}
+
+/// Bytes of the files under `root` (0 for what cannot be read: a
+/// repository being deleted). Links are not followed.
+fn files_bytes(root: &Path) -> u64 {
+    let mut total = 0;
+    let mut folders = vec![root.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        let Ok(entries) = std::fs::read_dir(&folder) else { continue };
+        for entry in entries.flatten() {
+            match entry.metadata() {
+                Ok(m) if m.is_dir() => folders.push(entry.path()),
+                Ok(m) if m.is_file() => total += m.len(),
+                _ => {}
+            }
+        }
+    }
+    total
 }
 
 #[cfg(test)]

@@ -45,9 +45,11 @@ const ONE_REQUEST: &str = "FBKSD_RUN and FBKSD_PUBLISH cannot be combined (nor g
 const PUBLISH_NEEDS: &str = "FBKSD_PUBLISH needs the UUID of one of your results (the key in its /results/<uuid> URL)";
 
 /// The `pre-receive` hook of every repository: the rules of
-/// [`Request::parse`] for push options, refusing a push before anything is
-/// written. Its lines reach the pusher as `remote:` lines.
+/// [`Request::parse`] for push options, and the account's repository
+/// quota ([`crate::git::RepositoryQuota`]), refusing a push before anything
+/// is written. Its lines reach the pusher as `remote:` lines.
 pub fn pre_receive_hook() -> String {
+    use crate::projects::DELETE_OR_ASK;
     format!(
         r#"#!/bin/sh
 # FBKSD: check the push options before anything is written (the same rules
@@ -82,6 +84,18 @@ done
 if [ "$requests" -gt 1 ]; then
     echo "FBKSD: {ONE_REQUEST}"
     exit 1
+fi
+# What the account's repositories may hold together (set by the server for
+# pushes): what this push brings waits in git's quarantine until now. Plain
+# sh and coreutils only (the server's image is a minimal Debian: no find).
+if [ -n "${{FBKSD_MAX_REPOSITORIES_BYTES:-}}" ] && [ -n "${{GIT_QUARANTINE_PATH:-}}" ]; then
+    incoming=$(du -sb "$GIT_QUARANTINE_PATH" | cut -f1)
+    if [ $((FBKSD_REPOSITORIES_BYTES + incoming)) -gt "$FBKSD_MAX_REPOSITORIES_BYTES" ]; then
+        mib() {{ tenths=$((($1 * 10 + 524288) / 1048576)); echo "$((tenths / 10)).$((tenths % 10))"; }}
+        echo "FBKSD: this push brings $(mib "$incoming") MiB, and the repositories of your projects hold \
+$(mib "$FBKSD_REPOSITORIES_BYTES") of the $((FBKSD_MAX_REPOSITORIES_BYTES / 1048576)) MiB one account may keep: {DELETE_OR_ASK}"
+        exit 1
+    fi
 fi
 exit 0
 "#

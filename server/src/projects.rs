@@ -169,10 +169,7 @@ async fn create_with_repository(
     if owned as u64 >= most {
         return Err(ServiceError::forbidden(
             "too_many_projects",
-            format!(
-                "you own {owned} projects, the most one account may ({most}): delete one you no longer need \
-                 (its published results stay on the board) or ask the administrator for more"
-            ),
+            format!("you own {owned} projects, the most one account may ({most}): {DELETE_OR_ASK}"),
         ));
     }
     let project = insert(&state.pool, owner, name, visibility).await?;
@@ -258,6 +255,21 @@ pub async fn visible(pool: &AnyPool, user: Option<&User>, after: &str) -> Result
     let more = projects.len() > PAGE;
     projects.truncate(PAGE);
     Ok((projects, more))
+}
+
+/// What to do when an account has reached what it may own.
+pub const DELETE_OR_ASK: &str =
+    "delete a project you no longer need (its published results stay on the board) or ask the administrator for more";
+
+/// What the repositories of `owner_id`'s projects hold together, and the
+/// most they may (`max_repository_mib_per_user`): a push to any of them is
+/// weighed against it.
+pub async fn repository_quota(state: &AppState, owner_id: &str) -> Result<crate::git::RepositoryQuota, sqlx::Error> {
+    let ids = ids_of_owner(&state.pool, owner_id).await?;
+    Ok(crate::git::RepositoryQuota {
+        used_bytes: state.git.repositories_bytes(ids).await,
+        max_bytes: state.config.max_repository_mib_per_user.saturating_mul(1 << 20),
+    })
 }
 
 /// Ids of a user's projects (to delete their repositories with the account).

@@ -4,7 +4,8 @@
 //! sets that belong to their project (not its name), owner-only modes in
 //! the data directory, request bodies streamed rather than held, results
 //! a runner may upload only against the service's references, every field
-//! checked, and git processes that slow clones cannot all hold.
+//! checked, git processes that slow clones cannot all hold, and what an
+//! account makes (rows, repositories on disk) bounded.
 
 mod common;
 
@@ -558,6 +559,44 @@ async fn slow_clones_leave_git_to_everyone_else() {
         assert!(since.elapsed() < Duration::from_secs(60), "anonymous clients still refused: {output}");
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
+}
+
+/// What an account's repositories hold together is bounded, checked on
+/// every push before anything is written. Before, only one push's size
+/// was: 100 projects could each grow by a push at a time, for ever.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_accounts_repositories_hold_a_bounded_size_together() {
+    let server = spawn_with(Db::Sqlite, |c| c.max_repository_mib_per_user = 1).await;
+    let ada = server.user("ada@example.org").await;
+    server.create_project(&ada, "first", "private").await;
+    server.create_project(&ada, "second", "private").await;
+    let repo = technique_repository("box-filter-python");
+    std::fs::write(repo.path().join("weights.bin"), common::noise(600_000, 0x9e37_79b9_7f4a_7c15)).unwrap();
+    common::commit_all(repo.path(), "weights");
+    let (pushed, output) = push(repo.path(), &server.clone_url("first", &ada.token), &[]);
+    assert!(pushed, "600 KB fit in 1 MiB: {output}");
+
+    // Another 600 KB, to the other project: the two would hold more than 1 MiB.
+    let other = technique_repository("box-filter-python");
+    std::fs::write(other.path().join("weights.bin"), common::noise(600_000, 0x2545_f491_4f6c_dd1d)).unwrap();
+    common::commit_all(other.path(), "other weights");
+    let (pushed, output) = push(other.path(), &server.clone_url("second", &ada.token), &["FBKSD_RUN"]);
+    assert!(!pushed, "{output}");
+    assert!(
+        output.contains("FBKSD: this push brings 0.") && output.contains("of the 1 MiB one account may keep"),
+        "the pusher is told why: {output}"
+    );
+    assert!(output.contains("delete a project you no longer need"), "and what to do: {output}");
+    assert!(common::project_jobs(&server, &ada, "second").await.is_empty(), "a refused push starts nothing");
+    let listed = common::git(other.path(), &["ls-remote", &server.clone_url("second", &ada.token)]);
+    assert!(listed.status.success() && listed.stdout.is_empty(), "nothing was written: {listed:?}");
+
+    // Room made by deleting the first project, the same push goes through.
+    let response = ada.api(Method::DELETE, format!("{}/api/v1/projects/first", server.url)).send().await.unwrap();
+    assert!(response.status().is_success(), "{}", response.status());
+    let (pushed, output) = push(other.path(), &server.clone_url("second", &ada.token), &["FBKSD_RUN"]);
+    assert!(pushed, "{output}");
+    assert_eq!(common::project_jobs(&server, &ada, "second").await.len(), 1);
 }
 
 /// Rows a user makes stay bounded: projects and access tokens per account

@@ -3,15 +3,9 @@
 
 mod common;
 
-use common::{json_of, push, spawn, spawn_with, technique_repository, Db, FakeRunner};
+use common::{json_of, project_jobs, push, spawn, spawn_with, technique_repository, Db, FakeRunner};
 use reqwest::Method;
 use serde_json::{json, Value};
-
-async fn jobs_of(server: &common::TestServer, user: &common::TestUser, name: &str) -> Vec<Value> {
-    let body =
-        json_of(user.api(Method::GET, format!("{}/api/v1/projects/{name}", server.url)).send().await.unwrap()).await.1;
-    body["jobs"].as_array().cloned().unwrap_or_default()
-}
 
 async fn run_pipeline(
     server: &common::TestServer,
@@ -38,7 +32,7 @@ on_both_databases!(a_broken_repository_fails_its_build_at_once_and_mails_the_aut
     common::commit_all(repo.path(), "typo");
     assert!(push(repo.path(), &server.clone_url("broken", &ada.token), &[]).0, "the push itself lands");
 
-    let jobs = jobs_of(&server, &ada, "broken").await;
+    let jobs = project_jobs(&server, &ada, "broken").await;
     assert_eq!(jobs[0]["state"], "failed");
     assert_eq!(jobs[0]["failure_reason"], "build_failed");
     let message = jobs[0]["message"].as_str().unwrap();
@@ -54,7 +48,7 @@ on_both_databases!(a_broken_repository_fails_its_build_at_once_and_mails_the_aut
     assert_eq!(status, 422, "{body}");
     assert_eq!(body["job"]["state"], "failed");
     assert!(body["job"]["message"].as_str().unwrap().contains("\"technique_type\""), "{body}");
-    assert_eq!(jobs_of(&server, &ada, "broken").await.len(), 2);
+    assert_eq!(project_jobs(&server, &ada, "broken").await.len(), 2);
     assert_eq!(server.mails_to("ada@example.org").iter().filter(|m| m.contains("failed")).count(), 2);
     assert!(runner.claim(0).await.is_none());
 
@@ -90,7 +84,7 @@ on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is
     let key = uuid::Uuid::new_v4().to_string();
     let (pushed, hook_output) = push(repo.path(), &url, &["FBKSD_RUN", &format!("FBKSD_PUBLISH={key}")]);
     assert!(!pushed && hook_output.contains("cannot be combined"), "{hook_output}");
-    assert!(jobs_of(&server, &ada, "vars").await.is_empty(), "no pipeline, and the refs did not move");
+    assert!(project_jobs(&server, &ada, "vars").await.is_empty(), "no pipeline, and the refs did not move");
     assert_eq!(common::git(repo.path(), &["ls-remote", &url]).stdout.len(), 0);
 
     assert!(push(repo.path(), &url, &[]).0);
@@ -109,7 +103,7 @@ on_both_databases!(bad_variables_and_push_options_are_refused_before_anything_is
     let (status, body) =
         run_pipeline(&server, &ada, "vars", json!({ "FBKSD_PUBLISH": uuid::Uuid::new_v4().to_string() })).await;
     assert_eq!((status, body["error"].as_str()), (404, Some("not_found")), "{body}");
-    assert_eq!(jobs_of(&server, &ada, "vars").await.len(), 1, "only the push's build job");
+    assert_eq!(project_jobs(&server, &ada, "vars").await.len(), 1, "only the push's build job");
 
     // Invalid UUIDs and unknown projects.
     let bad = ada.api(Method::GET, format!("{}/api/v1/results/not-a-uuid", server.url)).send().await.unwrap();
@@ -143,22 +137,13 @@ on_both_databases!(oversized_pushes_and_uploads_are_refused, |db: Db| async move
     let ada = server.user("ada@example.org").await;
     server.create_project(&ada, "big", "private").await;
     let repo = technique_repository("box-filter-python");
-    // Incompressible bytes, well over the limit.
-    let mut x = 0x9e37_79b9_7f4a_7c15u64;
-    let noise: Vec<u8> = (0..400_000)
-        .map(|_| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 24) as u8
-        })
-        .collect();
-    std::fs::write(repo.path().join("weights.bin"), noise).unwrap();
+    // Well over the limit.
+    std::fs::write(repo.path().join("weights.bin"), common::noise(400_000, 0x9e37_79b9_7f4a_7c15)).unwrap();
     common::commit_all(repo.path(), "big weights");
     let (pushed, output) = push(repo.path(), &server.clone_url("big", &ada.token), &[]);
     assert!(!pushed, "{output}");
     assert!(output.contains("maximum allowed size") || output.contains("413"), "{output}");
-    assert!(jobs_of(&server, &ada, "big").await.is_empty());
+    assert!(project_jobs(&server, &ada, "big").await.is_empty());
 
     // A small push, then uploads over the job's limit.
     assert!(common::git(repo.path(), &["reset", "-q", "--hard", "HEAD~1"]).status.success());
@@ -186,7 +171,7 @@ on_both_databases!(oversized_pushes_and_uploads_are_refused, |db: Db| async move
         .finish(&runner, json!({ "state": "failed", "reason": "invalid_output", "message": "NaN in 3 pixels" }))
         .await;
     assert_eq!(status, 200);
-    let jobs = jobs_of(&server, &ada, "big").await;
+    let jobs = project_jobs(&server, &ada, "big").await;
     assert_eq!(
         (jobs[0]["state"].as_str(), jobs[0]["failure_reason"].as_str()),
         (Some("failed"), Some("invalid_output"))
@@ -264,7 +249,7 @@ async fn refusals_over_a_quota_are_kept_only_so_many_a_day() {
     let (pushed, output) = push(repo.path(), &url, &[]);
     assert!(pushed && output.contains("no info.json") && output.contains("not kept"), "{output}");
     assert_eq!(server.mails_to("ada@example.org").len(), mails, "no mail past the day's most");
-    let jobs = jobs_of(&server, &ada, "pushy").await;
+    let jobs = project_jobs(&server, &ada, "pushy").await;
     let cancelled = jobs.iter().filter(|j| j["state"] == "cancelled").count();
     assert_eq!((jobs.len(), cancelled), (1 + kept, kept), "the queued run and {kept} refusals");
 }
@@ -681,10 +666,10 @@ on_both_databases!(a_tie_too_close_to_call_on_the_board_gets_more_seeds_until_it
     // Round one: both sets' runs behind the tie get seeds 3–5, the same
     // seeds; a runner that does not say it takes seeds jobs is not handed one.
     for name in ["steady", "shaky"] {
-        let mut jobs = jobs_of(&server, &ada, name).await;
+        let mut jobs = project_jobs(&server, &ada, name).await;
         while !jobs.iter().any(|j| j["kind"] == "seeds" && j["state"] == "queued") {
             tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-            jobs = jobs_of(&server, &ada, name).await;
+            jobs = project_jobs(&server, &ada, name).await;
         }
     }
     assert!(runner.claim(1).await.is_none(), "a runner from before seeds jobs is handed none");

@@ -365,15 +365,17 @@ pub async fn git(
         GitCaller::User(user) => format!("user {}", user.id),
         GitCaller::Job(job) => format!("job {job}"),
     };
-    let served = state
-        .git
-        .serve(
-            &project.id,
-            crate::git::GitRequest { method: &method, rest: &rest, query, headers: &headers, caller: &caller },
-            body,
-            &remote_user,
-        )
-        .await;
+    let quota = if rest == "git-receive-pack" {
+        match crate::projects::repository_quota(&state, &project.owner_id).await {
+            Ok(quota) => Some(quota),
+            Err(e) => return ApiError::from(e).into_response(),
+        }
+    } else {
+        None
+    };
+    let request =
+        crate::git::GitRequest { method: &method, rest: &rest, query, headers: &headers, caller: &caller, quota };
+    let served = state.git.serve(&project.id, request, body, &remote_user).await;
     match (served, user) {
         (crate::git::Served::Pushed(pushed), Some(user)) => {
             let messages = crate::pipelines::start_push(&state, &project, user, &pushed.record).await;
