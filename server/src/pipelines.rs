@@ -511,10 +511,11 @@ async fn check_quota(state: &AppState, user_id: &str, kind: JobKind) -> Result<(
     }
     let queued = crate::jobs::queued_count(&state.pool, user_id).await?;
     if queued >= state.config.max_queued_jobs_per_user as i64 {
+        let jobs = if queued == 1 { "job" } else { "jobs" };
         return Err(ServiceError::too_many(
             "quota_queued",
             format!(
-                "you have {queued} jobs queued (the limit is {}): wait for them to run",
+                "you have {queued} {jobs} queued (the limit is {}): wait for them to run",
                 state.config.max_queued_jobs_per_user
             ),
         ));

@@ -239,7 +239,7 @@ async fn refusals_over_a_quota_are_kept_only_so_many_a_day() {
     for n in 0..kept + 2 {
         common::commit_all(repo.path(), &format!("again {n}"));
         let (pushed, output) = push(repo.path(), &url, &["FBKSD_RUN"]);
-        assert!(pushed && output.contains("not run: you have 1 jobs queued"), "push {n}: {output}");
+        assert!(pushed && output.contains("not run: you have 1 job queued"), "push {n}: {output}");
         assert_eq!(output.contains("not kept"), n >= kept, "push {n}: {output}");
     }
     // A broken commit past the day's most: told, neither kept nor mailed.
