@@ -185,9 +185,10 @@ pub struct GitRequest<'a> {
 }
 
 /// What one account's repositories hold on disk together, and the most
-/// they may. Checked per push, so two pushes of one account at the same
-/// moment may each fit alone and pass it together by at most one push
-/// (`max_push_bytes`, times the caller's [`MAX_REQUESTS_PER_CALLER`]).
+/// they may. Checked per push against what was there when it began, so
+/// pushes of one account at the same moment may each fit alone and pass
+/// it together: by at most `max_push_bytes` for each push beside the
+/// first (a caller has at most [`MAX_REQUESTS_PER_CALLER`] at once).
 #[derive(Debug, Clone, Copy)]
 pub struct RepositoryQuota {
     /// Bytes of the files of the account's repositories now.
