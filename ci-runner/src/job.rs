@@ -78,28 +78,6 @@ impl From<ApiError> for Failure {
 /// How often a build directory's size is checked.
 const DISK_POLL: Duration = Duration::from_millis(250);
 
-/// Bytes under `dir`, symbolic links counted as links (never followed);
-/// stops counting past `cap`.
-fn disk_usage(dir: &Path, cap: u64) -> u64 {
-    let mut total = 0;
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
-        for entry in entries.flatten() {
-            let Ok(meta) = entry.path().symlink_metadata() else { continue };
-            if meta.is_dir() {
-                stack.push(entry.path());
-            }
-            // Allocated blocks: a sparse file costs what it occupies.
-            total += std::os::unix::fs::MetadataExt::blocks(&meta) * 512;
-            if total > cap {
-                return total;
-            }
-        }
-    }
-    total
-}
-
 /// Most output held between two sends: a build printing without pause
 /// (`yes`) fills this in a blink, and the rest waits as a count, not in
 /// memory.
@@ -337,7 +315,7 @@ async fn clone(claim: &Claim, src: &Path, max_bytes: u64) -> Result<(), Failure>
             )));
         }
     }
-    if disk_usage(src, max_bytes) > max_bytes {
+    if fbksd_exchange::disk::disk_usage(src, max_bytes) > max_bytes {
         return Err(Failure::new(
             FailureReason::OverLimit,
             format!("the checkout takes more than {} MiB: keep data sets out of the repository", max_bytes >> 20),
@@ -490,7 +468,9 @@ async fn build(
         loop {
             tokio::time::sleep(DISK_POLL).await;
             let dir = install.host.clone();
-            let used = tokio::task::spawn_blocking(move || disk_usage(&dir, max_bytes)).await.unwrap_or(0);
+            let used = tokio::task::spawn_blocking(move || fbksd_exchange::disk::disk_usage(&dir, max_bytes))
+                .await
+                .unwrap_or(0);
             if used > max_bytes {
                 over.store(true, Ordering::SeqCst);
                 ctx.sandbox.remove_job_containers(&claim.job.id).await;

@@ -191,7 +191,7 @@ pub struct GitRequest<'a> {
 /// first (a caller has at most [`MAX_REQUESTS_PER_CALLER`] at once).
 #[derive(Debug, Clone, Copy)]
 pub struct RepositoryQuota {
-    /// Bytes of the files of the account's repositories now.
+    /// Bytes the account's repositories take on disk now.
     pub used_bytes: u64,
     /// The most they may hold.
     pub max_bytes: u64,
@@ -445,10 +445,10 @@ impl GitHost {
         self.root.join(format!("{project_id}.git"))
     }
 
-    /// Bytes the files of these projects' repositories hold on disk.
+    /// Bytes these projects' repositories take on disk.
     pub async fn repositories_bytes(&self, project_ids: Vec<String>) -> u64 {
         let roots: Vec<PathBuf> = project_ids.iter().map(|id| self.repository(id)).collect();
-        let walk = move || roots.iter().map(|root| files_bytes(root)).sum();
+        let walk = move || roots.iter().map(|root| fbksd_exchange::disk::disk_usage(root, u64::MAX)).sum();
         tokio::task::spawn_blocking(walk).await.unwrap_or(0)
     }
 
@@ -872,24 +872,6 @@ async fn spool(body: Body, dir: &Path, cap: u64) -> Result<Spooled, Spool> {
     }
     out.flush().await.map_err(Spool::Disk)?;
     Ok(Spooled { file, length })
-}
-
-/// Bytes of the files under `root` (0 for what cannot be read: a
-/// repository being deleted). Links are not followed.
-fn files_bytes(root: &Path) -> u64 {
-    let mut total = 0;
-    let mut folders = vec![root.to_path_buf()];
-    while let Some(folder) = folders.pop() {
-        let Ok(entries) = std::fs::read_dir(&folder) else { continue };
-        for entry in entries.flatten() {
-            match entry.metadata() {
-                Ok(m) if m.is_dir() => folders.push(entry.path()),
-                Ok(m) if m.is_file() => total += m.len(),
-                _ => {}
-            }
-        }
-    }
-    total
 }
 
 #[cfg(test)]

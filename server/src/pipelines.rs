@@ -89,8 +89,9 @@ fi
 # pushes): what this push brings waits in git's quarantine until now. Plain
 # sh and coreutils only (the server's image is a minimal Debian: no find).
 if [ -n "${{FBKSD_MAX_REPOSITORIES_BYTES:-}}" ] && [ -n "${{GIT_QUARANTINE_PATH:-}}" ]; then
-    incoming=$(du -sb "$GIT_QUARANTINE_PATH" | cut -f1)
-    incoming=${{incoming:-0}}
+    # Allocated blocks, as the server counts the repositories (fbksd_exchange::disk).
+    incoming=$(du -sk "$GIT_QUARANTINE_PATH" | cut -f1)
+    incoming=$((${{incoming:-0}} * 1024))
     if [ $((FBKSD_REPOSITORIES_BYTES + incoming)) -gt "$FBKSD_MAX_REPOSITORIES_BYTES" ]; then
         mib() {{ tenths=$((($1 * 10 + 524288) / 1048576)); echo "$((tenths / 10)).$((tenths % 10))"; }}
         echo "FBKSD: this push brings $(mib "$incoming") MiB, and the repositories of your projects hold \

@@ -19,9 +19,12 @@
 //! - [`runner_api`]: the messages of the runner API, job kinds and states.
 //! - [`pixels`]: the viewer's pixel files (exact floats, small on the wire).
 //! - [`viewer`]: the results viewer's document.
+//! - [`disk`]: how much room files take, counted one way by the runner
+//!   and the server.
 #![deny(missing_docs)]
 
 pub mod cost;
+pub mod disk;
 pub mod environments;
 pub mod pixels;
 pub mod ranking;
