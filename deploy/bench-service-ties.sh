@@ -20,7 +20,16 @@
 # what they cost), the scenes the runner measured again because the
 # machine was slow during them, and the minutes it took; then the counts.
 #
-#   [ROUNDS=N] [MAX_SEEDS=M] bash deploy/bench-service-ties.sh [REPETITIONS]   # default 20
+#   [ROUNDS=N] [MAX_SEEDS=M] [SCENES=a,b] [SPP=x,y] bash deploy/bench-service-ties.sh [REPETITIONS]   # default 20
+#
+# SCENES and SPP replace the sphere and sin-bands at 4 and 16 spp (SPP=
+# empty: each scene's own budgets); ROUNDS=1 is the plain box filter's
+# arithmetic, the walk of README's service (ci-runner/README) on
+# SCENES=experimental/black-ring,…  SPP= ROUNDS=1 (there the doubled copy's
+# second sum is lost in its memory traffic: it costs about what the copies
+# do, and "doubled below" reads NO). Each set's results (its runs' times by
+# seed) are kept in target/bench-service-ties/sets/, which
+# deploy/replay-service-ties.py ranks again with another `fbksd`.
 #
 # About 3 min per repetition on 2 cores, after the release build, the
 # images and the two references (serve.sh caches them). Run it on an
@@ -32,7 +41,7 @@ rounds=${ROUNDS:-30}
 work=$(pwd)/target/bench-service-ties
 bind=127.0.0.1:8197
 rm -rf "$work"
-mkdir -p "$work/techniques"
+mkdir -p "$work/techniques" "$work/sets"
 
 # The techniques, as submission repositories.
 . deploy/lib/heavy-box-filter.sh
@@ -44,10 +53,12 @@ printf '%s\n' box-copy-a box-copy-b box-doubled >"$list"
 
 server_env=()
 [ -n "${MAX_SEEDS:-}" ] && server_env=(FBKSD_SERVER_MAX_SEEDS="$MAX_SEEDS")
+spp=${SPP-4,16}
+[ -n "$spp" ] && server_env+=(FBKSD_CI_SPP="$spp")
 # setsid: the service gets a process group of its own, stopped as one.
 env "${server_env[@]}" FBKSD_DATA_DIR="$work/data" FBKSD_RUNNER_DIR="$work/runner" \
     FBKSD_SERVER_BIND="$bind" FBKSD_BASELINES="$list" \
-    FBKSD_CI_SCENES=experimental/sphere,experimental/sin-bands FBKSD_CI_SPP=4,16 \
+    FBKSD_CI_SCENES="${SCENES:-experimental/sphere,experimental/sin-bands}" \
     setsid bash deploy/serve.sh >"$work/serve.log" 2>&1 &
 serve=$!
 trap 'kill -INT -- -$serve 2>/dev/null; wait $serve 2>/dev/null || true' EXIT
@@ -137,7 +148,9 @@ def disturbance(board):
     scenes."""
     rates = {}
     for set_id in {e["result_id"] for g in board["groups"] for e in g["entries"]}:
-        for run in call("GET", f"/api/v1/results/{set_id}")[0]["runs"]:
+        result = call("GET", f"/api/v1/results/{set_id}")[0]
+        json.dump(result, open(f"{work}/sets/{set_id}.json", "w"))
+        for run in result["runs"]:
             per_sample = [r["render_cpu_ms"] / r["used_samples"] for r in run["repeats"] if r.get("used_samples")]
             if per_sample:
                 rates.setdefault(run["scene"], {}).setdefault(set_id, []).extend(per_sample)
