@@ -70,6 +70,20 @@ impl Costs {
         run.repeats.iter().filter(|r| r.status == RunStatus::Ok).map(|r| (r.seed, cost(r))).collect()
     }
 
+    /// The technique's own part of the run's cost in ms for each sample
+    /// seed: its CPU time, or the whole cost where CPU times were not
+    /// measured (what [`Costs::by_seed`] charges beside the samples).
+    pub fn own_by_seed(&self, run: &IndexEntry) -> Samples {
+        if run.repeats.is_empty() {
+            return [(0, run.time())].into();
+        }
+        let own = |r: &Repeat| match self.rate(&run.scene, r.sample_floats) {
+            Some(_) if measured(r) => r.technique_cpu_ms,
+            _ => r.time_ms(),
+        };
+        run.repeats.iter().filter(|r| r.status == RunStatus::Ok).map(|r| (r.seed, own(r))).collect()
+    }
+
     /// The run's cost in ms: the median over its seeds (0 for none).
     pub fn of_run(&self, run: &IndexEntry) -> f64 {
         median(&self.by_seed(run))
