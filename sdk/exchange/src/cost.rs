@@ -60,28 +60,28 @@ impl Costs {
 
     /// The run's cost in ms for each sample seed, one per `ok` repeat.
     pub fn by_seed(&self, run: &IndexEntry) -> Samples {
-        if run.repeats.is_empty() {
-            return [(0, run.time())].into();
-        }
-        let cost = |r: &Repeat| match self.rate(&run.scene, r.sample_floats) {
-            Some(rate) if measured(r) => r.technique_cpu_ms + rate * r.used_samples as f64,
-            _ => r.time_ms(),
-        };
-        run.repeats.iter().filter(|r| r.status == RunStatus::Ok).map(|r| (r.seed, cost(r))).collect()
+        self.parts_by_seed(run).into_iter().map(|(seed, own, samples)| (seed, own + samples)).collect()
     }
 
     /// The technique's own part of the run's cost in ms for each sample
     /// seed: its CPU time, or the whole cost where CPU times were not
     /// measured (what [`Costs::by_seed`] charges beside the samples).
     pub fn own_by_seed(&self, run: &IndexEntry) -> Samples {
+        self.parts_by_seed(run).into_iter().map(|(seed, own, _)| (seed, own)).collect()
+    }
+
+    /// Each seed's cost in two parts: the technique's own, and its samples
+    /// at the pooled rate (0 where CPU times were not measured and the
+    /// whole cost is the wall time).
+    fn parts_by_seed(&self, run: &IndexEntry) -> Vec<(u64, f64, f64)> {
         if run.repeats.is_empty() {
-            return [(0, run.time())].into();
+            return vec![(0, run.time(), 0.0)];
         }
-        let own = |r: &Repeat| match self.rate(&run.scene, r.sample_floats) {
-            Some(_) if measured(r) => r.technique_cpu_ms,
-            _ => r.time_ms(),
+        let parts = |r: &Repeat| match self.rate(&run.scene, r.sample_floats) {
+            Some(rate) if measured(r) => (r.seed, r.technique_cpu_ms, rate * r.used_samples as f64),
+            _ => (r.seed, r.time_ms(), 0.0),
         };
-        run.repeats.iter().filter(|r| r.status == RunStatus::Ok).map(|r| (r.seed, own(r))).collect()
+        run.repeats.iter().filter(|r| r.status == RunStatus::Ok).map(parts).collect()
     }
 
     /// The run's cost in ms: the median over its seeds (0 for none).

@@ -182,7 +182,8 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
 
 /// Calls `visit` with every time point of every scene: the scene, the
 /// point, the cost noise at the point, its metrics, and where each
-/// technique's value there comes from (techniques with no value there left out).
+/// technique's value there comes from (techniques with no value there left
+/// out).
 fn for_each_time_point<'a>(
     runs: &'a [IndexEntry],
     mut visit: impl FnMut(&'a str, &Timed<'a>, CostNoise, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),

@@ -201,9 +201,9 @@ pub struct CostNoise {
 /// scene and budget, the farthest apart differed by 5.6 times the pooled
 /// seed noise, where a job's noise of 1 puts the 1 % threshold at 4.2 (50
 /// pairs beyond it) and 1.5 at 5.9 (none). Twice the work (a log-ratio of
-/// 0.69) stays beyond it while the seeds scatter by less than 11 %. Inside one job (`fbksd run`)
-/// the term is not needed, and it is kept there too: one rule, which only
-/// adds ties of costs within a job's noise.
+/// 0.69) stays beyond it while the seeds scatter by less than 11 %. Inside
+/// one job (`fbksd run`) the term is not needed, and it is kept there too:
+/// one rule, which only adds ties of costs within a job's noise.
 pub const JOB_NOISE: f64 = 1.5;
 
 impl CostNoise {
