@@ -20,8 +20,12 @@
 # what they cost), the scenes the runner measured again because the
 # machine was slow during them, and the minutes it took; then the counts.
 #
-#   [ROUNDS=N] [MAX_SEEDS=M] [SCENES=a,b] [SPP=x,y] bash deploy/bench-service-ties.sh [REPETITIONS]   # default 20
+#   [ROUNDS=N | COPIES=a,b] [MAX_SEEDS=M] [SCENES=a,b] [SPP=x,y] bash deploy/bench-service-ties.sh [REPETITIONS]   # default 20
 #
+# COPIES=nlm,nfor,… publishes each listed baseline (sdk/techniques/<name>)
+# twice instead, as <name>-a and <name>-b, with no doubled copy (its
+# column reads "–"): the between-job noise of real techniques, one row per
+# baseline and season, which deploy/job-noise.py reads off the kept sets.
 # SCENES and SPP replace the sphere and sin-bands at 4 and 16 spp (SPP=
 # empty: each scene's own budgets); ROUNDS=1 is the plain box filter's
 # arithmetic, the walk of README's service (ci-runner/README) on
@@ -43,13 +47,26 @@ bind=127.0.0.1:8197
 rm -rf "$work"
 mkdir -p "$work/techniques" "$work/sets"
 
-# The techniques, as submission repositories.
-. deploy/lib/heavy-box-filter.sh
-heavy_box_filter "$work/techniques/box-copy-a" "$rounds"
-heavy_box_filter "$work/techniques/box-copy-b" "$rounds"
-heavy_box_filter "$work/techniques/box-doubled" $((2 * rounds))
+# The techniques, as submission repositories; groups.txt lists each group
+# of copies (the first two) and its doubled copy, if any.
 list="$work/techniques/list.txt"
-printf '%s\n' box-copy-a box-copy-b box-doubled >"$list"
+if [ -n "${COPIES:-}" ]; then
+    : >"$work/techniques/groups.txt"
+    for name in ${COPIES//,/ }; do
+        [ -f "sdk/techniques/$name/info.json" ] || { echo "COPIES: sdk/techniques/$name is not a technique" >&2; exit 1; }
+        cp -r "sdk/techniques/$name" "$work/techniques/$name-a"
+        cp -r "sdk/techniques/$name" "$work/techniques/$name-b"
+        printf '%s\n' "$name-a" "$name-b" >>"$list"
+        echo "$name-a $name-b" >>"$work/techniques/groups.txt"
+    done
+else
+    . deploy/lib/heavy-box-filter.sh
+    heavy_box_filter "$work/techniques/box-copy-a" "$rounds"
+    heavy_box_filter "$work/techniques/box-copy-b" "$rounds"
+    heavy_box_filter "$work/techniques/box-doubled" $((2 * rounds))
+    printf '%s\n' box-copy-a box-copy-b box-doubled >"$list"
+    echo "box-copy-a box-copy-b box-doubled" >"$work/techniques/groups.txt"
+fi
 
 server_env=()
 [ -n "${MAX_SEEDS:-}" ] && server_env=(FBKSD_SERVER_MAX_SEEDS="$MAX_SEEDS")
@@ -63,13 +80,14 @@ env "${server_env[@]}" FBKSD_DATA_DIR="$work/data" FBKSD_RUNNER_DIR="$work/runne
 serve=$!
 trap 'kill -INT -- -$serve 2>/dev/null; wait $serve 2>/dev/null || true' EXIT
 
-echo "CPU: $(sed -n 's/^model name\s*: //p' /proc/cpuinfo | head -1), $(nproc) cores; ${repetitions} repetitions (seasons), ${rounds} rounds per sample, max_seeds ${MAX_SEEDS:-12 (default)}"
+echo "CPU: $(sed -n 's/^model name\s*: //p' /proc/cpuinfo | head -1), $(nproc) cores; ${repetitions} repetitions (seasons), ${COPIES:-${rounds} rounds per sample}, max_seeds ${MAX_SEEDS:-12 (default)}"
 echo
 python3 - "$bind" "$repetitions" "$work" "$serve" <<'EOF' | tee "$work/table.md"
 import json, os, re, statistics, sys, time, urllib.error, urllib.request
 bind, repetitions, work, serve = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4])
 url = f"http://{bind}"
-names = ("box-copy-a", "box-copy-b", "box-doubled")
+groups = [line.split() for line in open(f"{work}/techniques/groups.txt")]
+names = [name for group in groups for name in group]
 
 def call(method, path, body=None, token=None, session=None):
     headers = {"Content-Type": "application/json"}
@@ -168,8 +186,8 @@ def measured_again(season):
             found += [f"{j['project']} {m.group(1)} {m.group(2)}×" for m in re.finditer(r"\] (\S+): the renderer ran at ([0-9.]+)×", log)]
     return ", ".join(found) or "none"
 
-print("| repetition | copy a, copy b, doubled at equal spp | at equal time | copies tie at both | doubled below at equal time | renderer rate, slowest set / fastest | seeds jobs | measured again | min |")
-print("|---|---|---|---|---|---|---|---|---|")
+print("| repetition | technique | copy a, copy b(, doubled) at equal spp | at equal time | copies tie at both | doubled below at equal time | renderer rate, slowest set / fastest | seeds jobs | measured again | min |")
+print("|---|---|---|---|---|---|---|---|---|---|")
 season = 1
 for repetition in range(1, repetitions + 1):
     started = time.time()
@@ -179,16 +197,20 @@ for repetition in range(1, repetitions + 1):
     board = wait_for(f"season {season}'s board", lambda: settled(season))
     json.dump(board, open(f"{work}/board-{repetition}.json", "w"))
     ranks = {s["technique"]: (s["mean_rank"], s["mean_rank_time"]) for s in board["standings"]}
-    spp = [ranks[n][0] for n in names]
-    at_time = [ranks[n][1] for n in names]
-    # A set measured while its runner's calibration lay off its class's is
-    # ranked at equal spp only (no rank at equal time, shown "–"): a miss.
-    timed = None not in at_time
-    tie = spp[0] == spp[1] and timed and at_time[0] == at_time[1]
-    below = timed and at_time[2] > max(at_time[0], at_time[1])
-    show = lambda r: " / ".join("–" if v is None else f"{v:.2f}" for v in r)
-    print(f"| {repetition} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {'yes' if below else 'NO'} | {disturbance(board)} | {seeds_jobs(season)} | {measured_again(season)} | {(time.time() - started) / 60:.1f} |", flush=True)
+    rate, seeds, again = disturbance(board), seeds_jobs(season), measured_again(season)
+    minutes = (time.time() - started) / 60
+    for group in groups:
+        spp = [ranks[n][0] for n in group]
+        at_time = [ranks[n][1] for n in group]
+        # A set measured while its runner's calibration lay off its class's is
+        # ranked at equal spp only (no rank at equal time, shown "–"): a miss.
+        timed = None not in at_time
+        tie = spp[0] == spp[1] and timed and at_time[0] == at_time[1]
+        below = "–" if len(group) < 3 else "yes" if timed and at_time[2] > max(at_time[0], at_time[1]) else "NO"
+        show = lambda r: " / ".join("–" if v is None else f"{v:.2f}" for v in r)
+        print(f"| {repetition} | {group[0].removesuffix('-a').removesuffix('-copy')} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {below} | {rate} | {seeds} | {again} | {minutes:.1f} |", flush=True)
 EOF
 echo
-awk -F'|' '/^\| [0-9]/ { n++; if ($5 ~ /yes/) tie++; if ($6 ~ /yes/) below++; if ($8 !~ /none/) seeds++; if ($9 !~ /none/) again++; minutes += $10 }
-    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; seeds jobs in %d of %d; scenes measured again in %d of %d; %.1f min per repetition\n", tie, n, below, n, seeds, n, again, n, minutes / n }' "$work/table.md"
+awk -F'|' '/^\| [0-9]/ { n++; if ($6 ~ /yes/) tie++; if ($7 !~ /–/) { d++; if ($7 ~ /yes/) below++ }
+        if (!($2 in seen)) { seen[$2]; seasons++; if ($9 !~ /none/) seeds++; if ($10 !~ /none/) again++; minutes += $11 } }
+    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; seeds jobs in %d of %d seasons; scenes measured again in %d of %d; %.1f min per season\n", tie, n, below, d, seeds, seasons, again, seasons, minutes / seasons }' "$work/table.md"

@@ -3,7 +3,8 @@
 `fbksd` binary: each season's published sets (kept in the run's work
 directory: board-N.json and sets/) become one results index, ranked by the
 board's sort metric (MSE) with `fbksd results show`, and the copies' and the
-doubled copy's mean ranks at equal time are printed per season. The same
+doubled copy's mean ranks at equal time are printed per season (each group
+of techniques/groups.txt: COPIES runs have no doubled copy). The same
 measurements under two rules: build `fbksd` at each commit and compare.
 
     python3 deploy/replay-service-ties.py FBKSD WORK_DIR...
@@ -40,6 +41,7 @@ def season_index(work, board):
 
 
 for work in sys.argv[2:]:
+    groups = [line.split() for line in open(f"{work}/techniques/groups.txt")]
     boards = sorted(glob.glob(f"{work}/board-*.json"), key=lambda p: int(re.search(r"(\d+)\.json$", p).group(1)))
     rows = []
     for board in boards:
@@ -51,8 +53,10 @@ for work in sys.argv[2:]:
         # Rows of the standings: place, technique, mean rank at equal spp, at equal time, …
         rows_at_time = re.finditer(r"^\d+\s+(\S+)\s+[0-9.]+\s+([0-9.]+)", standings, re.M)
         at_time = {m.group(1): float(m.group(2)) for m in rows_at_time}
-        a, b, doubled = (at_time[t] for t in ("box-copy-a", "box-copy-b", "box-doubled"))
-        rows.append((a == b, f"{a:.2f} / {b:.2f} / {doubled:.2f}{'' if a == b else ' (copies apart)'}"))
-    print(f"{work}: copies tied at equal time in {sum(t for t, _ in rows)} of {len(rows)} seasons")
-    for n, (_, row) in enumerate(rows, 1):
-        print(f"  {n}: {row}")
+        for group in groups:
+            a, b, *doubled = (at_time[t] for t in group)
+            shown = " / ".join(f"{v:.2f}" for v in [a, b, *doubled])
+            rows.append((a == b, f"{group[0]}: {shown}{'' if a == b else ' (copies apart)'}"))
+    print(f"{work}: copies tied at equal time in {sum(t for t, _ in rows)} of {len(rows)} (season, group) pairs")
+    for n, (_, row) in enumerate(rows):
+        print(f"  {n // len(groups) + 1}: {row}")
