@@ -47,8 +47,8 @@ bind=127.0.0.1:8197
 rm -rf "$work"
 mkdir -p "$work/techniques" "$work/sets"
 
-# The techniques, as submission repositories; groups.txt lists each group
-# of copies (the first two) and its doubled copy, if any.
+# The techniques, as submission repositories; groups.txt lists each group:
+# its name, its two copies and its doubled copy, if any.
 list="$work/techniques/list.txt"
 if [ -n "${COPIES:-}" ]; then
     : >"$work/techniques/groups.txt"
@@ -57,7 +57,7 @@ if [ -n "${COPIES:-}" ]; then
         cp -r "sdk/techniques/$name" "$work/techniques/$name-a"
         cp -r "sdk/techniques/$name" "$work/techniques/$name-b"
         printf '%s\n' "$name-a" "$name-b" >>"$list"
-        echo "$name-a $name-b" >>"$work/techniques/groups.txt"
+        echo "$name $name-a $name-b" >>"$work/techniques/groups.txt"
     done
 else
     . deploy/lib/heavy-box-filter.sh
@@ -65,7 +65,7 @@ else
     heavy_box_filter "$work/techniques/box-copy-b" "$rounds"
     heavy_box_filter "$work/techniques/box-doubled" $((2 * rounds))
     printf '%s\n' box-copy-a box-copy-b box-doubled >"$list"
-    echo "box-copy-a box-copy-b box-doubled" >"$work/techniques/groups.txt"
+    echo "box box-copy-a box-copy-b box-doubled" >"$work/techniques/groups.txt"
 fi
 
 server_env=()
@@ -86,8 +86,9 @@ python3 - "$bind" "$repetitions" "$work" "$serve" <<'EOF' | tee "$work/table.md"
 import json, os, re, statistics, sys, time, urllib.error, urllib.request
 bind, repetitions, work, serve = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4])
 url = f"http://{bind}"
-groups = [line.split() for line in open(f"{work}/techniques/groups.txt")]
-names = [name for group in groups for name in group]
+groups = {line.split()[0]: line.split()[1:] for line in open(f"{work}/techniques/groups.txt")}
+names = [name for group in groups.values() for name in group]
+show = lambda r: " / ".join("–" if v is None else f"{v:.2f}" for v in r)
 
 def call(method, path, body=None, token=None, session=None):
     headers = {"Content-Type": "application/json"}
@@ -199,7 +200,7 @@ for repetition in range(1, repetitions + 1):
     ranks = {s["technique"]: (s["mean_rank"], s["mean_rank_time"]) for s in board["standings"]}
     rate, seeds, again = disturbance(board), seeds_jobs(season), measured_again(season)
     minutes = (time.time() - started) / 60
-    for group in groups:
+    for label, group in groups.items():
         spp = [ranks[n][0] for n in group]
         at_time = [ranks[n][1] for n in group]
         # A set measured while its runner's calibration lay off its class's is
@@ -207,8 +208,7 @@ for repetition in range(1, repetitions + 1):
         timed = None not in at_time
         tie = spp[0] == spp[1] and timed and at_time[0] == at_time[1]
         below = "–" if len(group) < 3 else "yes" if timed and at_time[2] > max(at_time[0], at_time[1]) else "NO"
-        show = lambda r: " / ".join("–" if v is None else f"{v:.2f}" for v in r)
-        print(f"| {repetition} | {group[0].removesuffix('-a').removesuffix('-copy')} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {below} | {rate} | {seeds} | {again} | {minutes:.1f} |", flush=True)
+        print(f"| {repetition} | {label} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {below} | {rate} | {seeds} | {again} | {minutes:.1f} |", flush=True)
 EOF
 echo
 awk -F'|' '/^\| [0-9]/ { n++; if ($6 ~ /yes/) tie++; if ($7 !~ /–/) { d++; if ($7 ~ /yes/) below++ }

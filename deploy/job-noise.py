@@ -6,8 +6,8 @@ in units of the seed-to-seed noise).
 
     python3 deploy/job-noise.py [--job-noise K] [--seeds N] WORK_DIR...
 
-Every published set of a group's copies (techniques/groups.txt: the first
-two names of each line; every season benchmarks each copy in a job of its
+Every published set of a group's copies (techniques/groups.txt: a group's
+name, then its two copies; every season benchmarks each copy in a job of its
 own) is one job of that program. Only the seeds its benchmark job measured count
 (--seeds, default 3: seeds 0 to N-1): seeds jobs add more seeds to a set
 from a job of their own. Per program and scene, over its jobs and
@@ -51,7 +51,7 @@ def t_quantile(p, df):
 def jobs_of(work):
     """{program: [set]} for one work directory: the sets of each group's copies."""
     groups = [line.split() for line in open(f"{work}/techniques/groups.txt")]
-    program = {name: group[0].removesuffix("-a").removesuffix("-copy") for group in groups for name in group[:2]}
+    program = {name: label for label, *copies in groups for name in copies[:2]}
     # A board lists each set once per group of scenes.
     sets = {(entry["technique"], entry["result_id"])
             for board in glob.glob(f"{work}/board-*.json")

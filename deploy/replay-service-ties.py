@@ -41,7 +41,7 @@ def season_index(work, board):
 
 
 for work in sys.argv[2:]:
-    groups = [line.split() for line in open(f"{work}/techniques/groups.txt")]
+    groups = [line.split()[1:] for line in open(f"{work}/techniques/groups.txt")]
     boards = sorted(glob.glob(f"{work}/board-*.json"), key=lambda p: int(re.search(r"(\d+)\.json$", p).group(1)))
     rows = []
     for board in boards:
