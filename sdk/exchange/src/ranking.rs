@@ -27,7 +27,10 @@
 //!   the two budgets around the point), seed by seed, never extrapolated: a
 //!   technique whose smallest budget costs more, beyond the noise, has no
 //!   value there and ranks last, because it cannot give a result for that
-//!   cost.
+//!   cost. Two techniques whose costs cannot be told apart at the budgets
+//!   they are read from or between are compared at one point of their
+//!   budgets, not each at its own ([`compared`]): neither is the faster,
+//!   so what is left between them is their values.
 //!
 //! [`stats::differ`]: crate::stats::differ
 //! [`stats::same_cost`]: crate::stats::same_cost
@@ -141,7 +144,7 @@ pub fn equal_spp(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) ->
     let cells = cells
         .into_iter()
         .map(|((scene, spp, metric), values)| {
-            place(scene, metric, At::Spp { spp }, values, &techniques, lower_is_better(metric))
+            place(scene, metric, At::Spp { spp }, values, &techniques, lower_is_better(metric), |_, _| None)
         })
         .collect();
     standings(&techniques, cells)
@@ -153,7 +156,7 @@ pub fn equal_spp(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) ->
 pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -> Ranking {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
     let mut cells = Vec::new();
-    for_each_time_point(runs, |scene, point, _, metrics, sources| {
+    for_each_time_point(runs, |scene, point, noise, metrics, sources| {
         for &metric in metrics {
             let values: Vec<(&str, Samples, Option<u64>)> = sources
                 .iter()
@@ -170,6 +173,10 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
                 values.iter().map(|(t, s, _)| (*t, s.clone())).collect(),
                 &techniques,
                 lower_is_better(metric),
+                |a, b| {
+                    let source = |t: &str| sources.iter().find(|(name, _)| *name == t).map(|(_, s)| s);
+                    compared(metric, point.ms, source(a)?, source(b)?, noise.scene)
+                },
             );
             for p in &mut cell.places {
                 p.spp = values.iter().find(|(t, ..)| *t == p.technique).and_then(|(.., spp)| *spp);
@@ -181,12 +188,12 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
 }
 
 /// Calls `visit` with every time point of every scene: the scene, the
-/// point, the cost noise at the point, its metrics, and where each
+/// point, the cost noise at the point and the scene's, its metrics, and where each
 /// technique's value there comes from (techniques with no value there left
 /// out).
 fn for_each_time_point<'a>(
     runs: &'a [IndexEntry],
-    mut visit: impl FnMut(&'a str, &Timed<'a>, CostNoise, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),
+    mut visit: impl FnMut(&'a str, &Timed<'a>, Noises, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),
 ) {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
     let costs = Costs::of(runs);
@@ -210,7 +217,7 @@ fn for_each_time_point<'a>(
             let noise = scene_noise.at_share(point.share);
             let sources: Vec<(&str, Source)> =
                 budgets.iter().filter_map(|(t, runs)| Some((*t, source(runs, point, noise)?))).collect();
-            visit(scene, point, noise, &metrics, &sources);
+            visit(scene, point, Noises { point: noise, scene: scene_noise }, &metrics, &sources);
         }
     }
 }
@@ -287,8 +294,8 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
     for_each_time_point(runs, |scene, point, noise, metrics, sources| {
         let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
         for (t, source) in sources {
-            if let Source::Budget(r) = source {
-                if could_cost_differ(&r.by_seed, &point.by_seed, noise, seeds) {
+            if let Some(r) = source.budget {
+                if could_cost_differ(&r.by_seed, &point.by_seed, noise.point, seeds) {
                     found.push(TooClose {
                         scene: scene.to_string(),
                         metric: None,
@@ -305,8 +312,11 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
                 .filter_map(|(t, source)| Some((*t, source, source.value(metric, point.ms)?.0)))
                 .filter(|(.., s)| comparable(s))
                 .collect();
-            for (i, (ta, a, sa)) in values.iter().enumerate() {
-                for (tb, b, sb) in &values[i + 1..] {
+            for (i, (ta, a, own_a)) in values.iter().enumerate() {
+                for (tb, b, own_b) in &values[i + 1..] {
+                    let other = compared(metric, point.ms, a, b, noise.scene)
+                        .filter(|(sa, sb)| comparable(sa) && comparable(sb));
+                    let (sa, sb) = other.as_ref().map_or((own_a, own_b), |(sa, sb)| (sa, sb));
                     if could_differ(sa, sb, seeds) {
                         found.push(TooClose {
                             scene: scene.to_string(),
@@ -334,6 +344,14 @@ fn comparable(s: &Samples) -> bool {
 /// A technique's error-against-cost curve: (cost, values by seed), in budget order.
 type Curve = Vec<(f64, Samples)>;
 
+/// The cost noise of a time point: at the point's share of the cost, and
+/// the scene's own ([`CostNoise::pooled`]).
+#[derive(Clone, Copy)]
+struct Noises {
+    point: CostNoise,
+    scene: CostNoise,
+}
+
 /// A run with its cost ([`Costs`]): the median, and by seed (its noise).
 struct Timed<'a> {
     run: &'a IndexEntry,
@@ -357,33 +375,70 @@ fn time_points<'a, 'b>(entries: &'b [Timed<'a>]) -> Vec<&'b Timed<'a>> {
     cheapest.into_values().collect()
 }
 
-/// Where a technique's value at a time point comes from.
-enum Source<'a, 'b> {
-    /// The result of a budget whose cost is the point's within the noise.
-    Budget(&'b Timed<'a>),
-    /// Its curve between the two budgets around the point (its runs, in budget order).
-    Between(&'b [&'b Timed<'a>]),
+/// Where a technique's value at a time point comes from: its runs (in
+/// budget order), and the budget whose cost is the point's within the
+/// noise, if one is; else its curve between the two budgets around the
+/// point.
+struct Source<'a, 'b> {
+    runs: &'b [&'b Timed<'a>],
+    budget: Option<&'b Timed<'a>>,
 }
 
-impl<'a> Source<'a, '_> {
+impl<'a, 'b> Source<'a, 'b> {
     /// The technique's values of `metric` at time `ms` by seed, and the
     /// budget they are the result of (`None` when read between budgets).
     fn value(&self, metric: &str, ms: f64) -> Option<(Samples, Option<u64>)> {
-        match self {
-            Source::Budget(r) => Some((r.run.samples(metric), Some(r.run.spp))),
-            Source::Between(runs) => {
-                let curve: Curve = runs.iter().map(|r| (r.ms, r.run.samples(metric))).collect();
-                Some((interpolate(&curve, ms)?, None))
-            }
+        match self.budget {
+            Some(r) => Some((r.run.samples(metric), Some(r.run.spp))),
+            None => Some((interpolate(&self.curve(metric, |r| r.ms), ms)?, None)),
+        }
+    }
+
+    /// The technique's curve of `metric` against `x` (its cost, or its budget).
+    fn curve(&self, metric: &str, x: impl Fn(&Timed) -> f64) -> Curve {
+        self.runs.iter().map(|r| (x(r), r.run.samples(metric))).collect()
+    }
+
+    /// Where on its budgets the value at time `ms` is read, in log spp:
+    /// its budget's, or as far between the two budgets around `ms` as `ms`
+    /// is between their costs (in log–log, as [`interpolate`] reads it).
+    fn position(&self, metric: &str, ms: f64) -> Option<f64> {
+        if let Some(r) = self.budget {
+            return Some((r.run.spp as f64).ln());
+        }
+        let (i, w) = bracket(&self.curve(metric, |r| r.ms), ms)?;
+        let spp = |k: usize| (self.runs[k].run.spp as f64).ln();
+        Some(if w == 0.0 { spp(i) } else { spp(i) + w * (spp(i + 1) - spp(i)) })
+    }
+
+    /// The values of `metric` at `position` (log spp) on its budgets, seed
+    /// by seed, in log–log between the two budgets around it.
+    fn at_position(&self, metric: &str, position: f64) -> Option<Samples> {
+        let spp = position.exp();
+        // A budget's own position, not a hair beside it.
+        let spp = self.runs.iter().map(|r| r.run.spp as f64).find(|s| (s - spp).abs() <= 1e-9 * s).unwrap_or(spp);
+        interpolate(&self.curve(metric, |r| r.run.spp as f64), spp)
+    }
+
+    /// Its runs from the budget at or below `low` to the one at or above
+    /// `high` (log spp); none where either is beyond its budgets.
+    fn span(&self, low: f64, high: f64) -> &'b [&'b Timed<'a>] {
+        let logs: Vec<f64> = self.runs.iter().map(|r| (r.run.spp as f64).ln()).collect();
+        let from = logs.iter().rposition(|l| *l <= low + 1e-12);
+        let to = logs.iter().position(|l| *l >= high - 1e-12);
+        match (from, to) {
+            (Some(from), Some(to)) if from <= to => &self.runs[from..=to],
+            _ => &[],
         }
     }
 
     /// The runs the value at time `ms` may be read from: the budget, or
     /// every pair of budgets around `ms` (or at it).
     fn runs(&self, ms: f64) -> impl Iterator<Item = &'a IndexEntry> + '_ {
-        let around: Vec<&IndexEntry> = match self {
-            Source::Budget(r) => vec![r.run],
-            Source::Between(runs) => runs
+        let around: Vec<&IndexEntry> = match self.budget {
+            Some(r) => vec![r.run],
+            None => self
+                .runs
                 .windows(2)
                 .filter(|w| w[0].ms.min(w[1].ms) <= ms && ms <= w[0].ms.max(w[1].ms))
                 .flat_map(|w| [w[0].run, w[1].run])
@@ -405,10 +460,45 @@ fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed, noise: CostNoise) ->
         .filter(|t| same_cost(&t.by_seed, &point.by_seed, noise))
         .min_by(|a, b| distance(a).total_cmp(&distance(b)));
     if let Some(t) = nearest {
-        return Some(Source::Budget(t));
+        return Some(Source { runs, budget: Some(t) });
     }
     let (first, last) = (runs.first()?.ms, runs.last()?.ms);
-    (first.min(last) < point.ms && point.ms < first.max(last)).then_some(Source::Between(runs))
+    (first.min(last) < point.ms && point.ms < first.max(last)).then_some(Source { runs, budget: None })
+}
+
+/// The values by seed that decide how two techniques compare in the cell
+/// of `metric` at time `ms`. Where their costs cannot be told apart at any
+/// budget the two values are read from or between ([`same_cost`] at the
+/// scene's `noise`, budget by budget), neither is the faster, so both are
+/// read at one position on their budgets, the mean of their two (in log
+/// spp): what is left between them is their values, as at equal samples.
+/// Read at their own positions, two such techniques would differ by how
+/// far each one's cost offset moved it between its budgets, alike on every
+/// seed, which the paired test takes for a difference: the same NL-means
+/// twice, through the service, read between its pass-through 1 spp and its
+/// costly 2 spp at a cheap technique's time points, was 0.3–2 % apart and
+/// placed apart in 12 of 14 such cells (AMD EPYC, 2026-12-07). `None`
+/// where each technique's own value decides.
+fn compared(metric: &str, ms: f64, a: &Source, b: &Source, noise: CostNoise) -> Option<(Samples, Samples)> {
+    let (pa, pb) = (a.position(metric, ms)?, b.position(metric, ms)?);
+    if pa == pb || !same_costs_around(a, b, pa.min(pb), pa.max(pb), noise) {
+        return None;
+    }
+    let common = (pa + pb) / 2.0;
+    Some((a.at_position(metric, common)?, b.at_position(metric, common)?))
+}
+
+/// Whether two techniques have the same budgets from the one at or below
+/// `low` to the one at or above `high` (log spp), at costs that cannot be
+/// told apart budget by budget at the scene's `noise` (at the larger of
+/// the two runs' shares of the cost that is their own).
+fn same_costs_around(a: &Source, b: &Source, low: f64, high: f64, noise: CostNoise) -> bool {
+    let (runs_a, runs_b) = (a.span(low, high), b.span(low, high));
+    !runs_a.is_empty()
+        && runs_a.len() == runs_b.len()
+        && runs_a.iter().zip(runs_b).all(|(ra, rb)| {
+            ra.run.spp == rb.run.spp && same_cost(&ra.by_seed, &rb.by_seed, noise.at_share(ra.share.max(rb.share)))
+        })
 }
 
 /// The value of a technique's curve (time, values by seed; in budget
@@ -416,17 +506,13 @@ fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed, noise: CostNoise) ->
 /// budgets around `t` (linear where a value is not positive); `None`
 /// outside the curve.
 pub fn interpolate(points: &[(f64, Samples)], t: f64) -> Option<Samples> {
-    if let Some((_, s)) = points.iter().find(|(time, s)| *time == t && !s.is_empty()) {
-        return Some(s.clone());
+    let (i, w) = bracket(points, t)?;
+    if w == 0.0 {
+        return Some(points[i].1.clone());
     }
-    for pair in points.windows(2) {
-        let ((t0, s0), (t1, s1)) = (&pair[0], &pair[1]);
-        if !(t0.min(*t1) < t && t < t0.max(*t1)) {
-            continue;
-        }
-        let w = (t / t0).ln() / (t1 / t0).ln();
-        let samples: Samples = s0
-            .iter()
+    let (s0, s1) = (&points[i].1, &points[i + 1].1);
+    Some(
+        s0.iter()
             .filter_map(|(seed, v0)| {
                 let v1 = s1.get(seed)?;
                 Some((
@@ -434,27 +520,54 @@ pub fn interpolate(points: &[(f64, Samples)], t: f64) -> Option<Samples> {
                     if *v0 > 0.0 && *v1 > 0.0 { (v0.ln() + w * (v1.ln() - v0.ln())).exp() } else { v0 + w * (v1 - v0) },
                 ))
             })
-            .collect();
-        if !samples.is_empty() {
-            return Some(samples);
-        }
-    }
-    None
+            .collect(),
+    )
 }
 
-/// Places the techniques of one cell.
-fn place(scene: &str, metric: &str, at: At, values: Vec<CellValues>, techniques: &BTreeSet<&str>, lower: bool) -> Cell {
+/// Where `t` lies on a curve: the point at it (weight 0), else the first
+/// pair of points around it that share a seed, and how far between them
+/// `t` is in log time; `None` outside the curve.
+fn bracket(points: &[(f64, Samples)], t: f64) -> Option<(usize, f64)> {
+    if let Some(i) = points.iter().position(|(time, s)| *time == t && !s.is_empty()) {
+        return Some((i, 0.0));
+    }
+    points
+        .windows(2)
+        .position(|pair| {
+            let ((t0, s0), (t1, s1)) = (&pair[0], &pair[1]);
+            t0.min(*t1) < t && t < t0.max(*t1) && s0.keys().any(|seed| s1.contains_key(seed))
+        })
+        .map(|i| {
+            let (t0, t1) = (points[i].0, points[i + 1].0);
+            (i, (t / t0).ln() / (t1 / t0).ln())
+        })
+}
+
+/// Places the techniques of one cell by their values, or, for a pair of
+/// techniques `compared` has other values for (`compared(a, b)`: a's and
+/// b's), by those.
+fn place(
+    scene: &str,
+    metric: &str,
+    at: At,
+    values: Vec<CellValues>,
+    techniques: &BTreeSet<&str>,
+    lower: bool,
+    compared: impl Fn(&str, &str) -> Option<(Samples, Samples)>,
+) -> Cell {
     let (values, _): (Vec<_>, Vec<_>) = values.into_iter().partition(|(_, s)| comparable(s));
     let means: Vec<f64> = values.iter().map(|(_, s)| mean(s)).collect();
-    let better = |i: usize, j: usize| if lower { means[i] < means[j] } else { means[i] > means[j] };
+    let better = |a: f64, b: f64| if lower { a < b } else { a > b };
     let mut places: Vec<Place> = (0..values.len())
         .map(|i| {
             let mut ahead = 0;
             let mut tied_with = Vec::new();
             for j in (0..values.len()).filter(|&j| j != i) {
-                if !differ(&values[i].1, &values[j].1) {
+                let pair = compared(values[i].0, values[j].0).filter(|(a, b)| comparable(a) && comparable(b));
+                let (own, other) = pair.as_ref().map_or((&values[i].1, &values[j].1), |(a, b)| (a, b));
+                if !differ(own, other) {
                     tied_with.push(values[j].0.to_string());
-                } else if better(j, i) {
+                } else if better(mean(other), mean(own)) {
                     ahead += 1;
                 }
             }
@@ -759,6 +872,44 @@ mod tests {
             assert!(cell.places.iter().all(|p| Some(p.spp) == Some(cell.places[0].spp) && p.spp.is_some()), "{cell:?}");
         }
         assert_eq!(time.standings[0].mean_rank, time.standings[1].mean_rank);
+    }
+
+    #[test]
+    fn the_same_program_twice_ties_where_it_is_read_between_budgets() {
+        // NL-means through the service (AMD EPYC, 2026-12-07): a pass-through at 1 spp,
+        // seconds of work at 2, so at the box filter's 2 and 4 spp time points each copy is
+        // read between its budgets, and each job's cost offset (within the noise) moved it
+        // to another point of its curve, alike on every seed: the copies were placed apart.
+        let mse1 = [1.0, 1.2, 0.9];
+        let mse2 = [0.05, 0.06, 0.045];
+        let mut runs = vec![
+            costly("box", "s", 1, &[0.8, 0.95, 0.75], &[10.0, 10.4, 9.7]),
+            costly("box", "s", 2, &[0.4, 0.5, 0.38], &[20.0, 20.6, 19.5]),
+            costly("box", "s", 4, &[0.2, 0.24, 0.19], &[40.0, 41.0, 39.2]),
+        ];
+        for (name, c1, c2, better) in [
+            ("nlm-a", [9.8, 10.1, 9.6], [1000.0, 1030.0, 985.0], 1.0),
+            ("nlm-b", [10.0, 9.9, 10.2], [1015.0, 1040.0, 1000.0], 1.0),
+            // The same costs as nlm-b, and 10 % better on every seed at 2 spp.
+            ("nlm-better", [10.0, 9.9, 10.2], [1015.0, 1040.0, 1000.0], 0.9),
+        ] {
+            runs.push(costly(name, "s", 1, &mse1, &c1));
+            runs.push(costly(name, "s", 2, &mse2.map(|v| v * better), &c2));
+        }
+        let time = equal_time(&runs, |_| true);
+        assert_eq!(time.cells.len(), 3);
+        let place = |cell: &Cell, t: &str| cell.places.iter().find(|p| p.technique == t).unwrap().clone();
+        for cell in &time.cells[1..] {
+            let (a, b) = (place(cell, "nlm-a"), place(cell, "nlm-b"));
+            assert_eq!((a.spp, b.spp), (None, None), "read between budgets: {cell:?}");
+            assert!(a.mean != b.mean, "each at its own point of its curve: {cell:?}");
+            assert_eq!(a.place, b.place, "{cell:?}");
+            assert!(a.tied_with.contains(&"nlm-b".to_string()), "{cell:?}");
+            // What is left between techniques of one cost is their values.
+            assert!(place(cell, "nlm-better").place < a.place, "{cell:?}");
+        }
+        let rank = |t: &str| time.standings.iter().find(|s| s.technique == t).unwrap().mean_rank;
+        assert_eq!(rank("nlm-a"), rank("nlm-b"), "{:?}", time.standings);
     }
 
     #[test]
