@@ -41,7 +41,7 @@ def season_index(work, board):
 
 
 for work in sys.argv[2:]:
-    groups = [line.split()[1:] for line in open(f"{work}/techniques/groups.txt")]
+    groups = [line.split() for line in open(f"{work}/techniques/groups.txt")]
     boards = sorted(glob.glob(f"{work}/board-*.json"), key=lambda p: int(re.search(r"(\d+)\.json$", p).group(1)))
     rows = []
     for board in boards:
@@ -53,10 +53,10 @@ for work in sys.argv[2:]:
         # Rows of the standings: place, technique, mean rank at equal spp, at equal time, …
         rows_at_time = re.finditer(r"^\d+\s+(\S+)\s+[0-9.]+\s+([0-9.]+)", standings, re.M)
         at_time = {m.group(1): float(m.group(2)) for m in rows_at_time}
-        for group in groups:
+        for label, *group in groups:
             a, b, *doubled = (at_time[t] for t in group)
             shown = " / ".join(f"{v:.2f}" for v in [a, b, *doubled])
-            rows.append((a == b, f"{group[0]}: {shown}{'' if a == b else ' (copies apart)'}"))
+            rows.append((a == b, f"{label}: {shown}{'' if a == b else ' (copies apart)'}"))
     print(f"{work}: copies tied at equal time in {sum(t for t, _ in rows)} of {len(rows)} (season, group) pairs")
     for n, (_, row) in enumerate(rows):
         print(f"  {n // len(groups) + 1}: {row}")

@@ -158,28 +158,24 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
     let mut cells = Vec::new();
     for_each_time_point(runs, |scene, point, noise, metrics, sources| {
         for &metric in metrics {
-            let values: Vec<(&str, Samples, Option<u64>)> = sources
-                .iter()
-                .filter_map(|(t, source)| {
-                    let (samples, spp) = source.value(metric, point.ms)?;
-                    Some((*t, samples, spp))
-                })
-                .collect();
+            let readings: Vec<(&str, &Source, Reading)> =
+                sources.iter().filter_map(|(t, source)| Some((*t, source, source.read(metric, point.ms)?))).collect();
             let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
+            let reading = |t: &str| readings.iter().find(|(name, ..)| *name == t);
             let mut cell = place(
                 scene,
                 metric,
                 at,
-                values.iter().map(|(t, s, _)| (*t, s.clone())).collect(),
+                readings.iter().map(|(t, _, r)| (*t, r.samples.clone())).collect(),
                 &techniques,
                 lower_is_better(metric),
                 |a, b| {
-                    let source = |t: &str| sources.iter().find(|(name, _)| *name == t).map(|(_, s)| s);
-                    compared(metric, point.ms, source(a)?, source(b)?, noise.scene)
+                    let ((_, a, ra), (_, b, rb)) = (reading(a)?, reading(b)?);
+                    compared(metric, (a, ra.position), (b, rb.position), noise)
                 },
             );
             for p in &mut cell.places {
-                p.spp = values.iter().find(|(t, ..)| *t == p.technique).and_then(|(.., spp)| *spp);
+                p.spp = reading(&p.technique).and_then(|(.., r)| r.spp);
             }
             cells.push(cell);
         }
@@ -188,12 +184,12 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
 }
 
 /// Calls `visit` with every time point of every scene: the scene, the
-/// point, the cost noise at the point and the scene's, its metrics, and where each
-/// technique's value there comes from (techniques with no value there left
-/// out).
+/// point, the scene's cost noise ([`CostNoise::pooled`]), its metrics, and
+/// where each technique's value there comes from (techniques with no value
+/// there left out).
 fn for_each_time_point<'a>(
     runs: &'a [IndexEntry],
-    mut visit: impl FnMut(&'a str, &Timed<'a>, Noises, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),
+    mut visit: impl FnMut(&'a str, &Timed<'a>, CostNoise, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),
 ) {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
     let costs = Costs::of(runs);
@@ -217,7 +213,7 @@ fn for_each_time_point<'a>(
             let noise = scene_noise.at_share(point.share);
             let sources: Vec<(&str, Source)> =
                 budgets.iter().filter_map(|(t, runs)| Some((*t, source(runs, point, noise)?))).collect();
-            visit(scene, point, Noises { point: noise, scene: scene_noise }, &metrics, &sources);
+            visit(scene, point, scene_noise, &metrics, &sources);
         }
     }
 }
@@ -295,7 +291,7 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
         let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
         for (t, source) in sources {
             if let Some(r) = source.budget {
-                if could_cost_differ(&r.by_seed, &point.by_seed, noise.point, seeds) {
+                if could_cost_differ(&r.by_seed, &point.by_seed, noise.at_share(point.share), seeds) {
                     found.push(TooClose {
                         scene: scene.to_string(),
                         metric: None,
@@ -307,16 +303,16 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
             }
         }
         for &metric in metrics {
-            let values: Vec<(&str, &Source, Samples)> = sources
+            let readings: Vec<(&str, &Source, Reading)> = sources
                 .iter()
-                .filter_map(|(t, source)| Some((*t, source, source.value(metric, point.ms)?.0)))
-                .filter(|(.., s)| comparable(s))
+                .filter_map(|(t, source)| Some((*t, source, source.read(metric, point.ms)?)))
+                .filter(|(.., r)| comparable(&r.samples))
                 .collect();
-            for (i, (ta, a, own_a)) in values.iter().enumerate() {
-                for (tb, b, own_b) in &values[i + 1..] {
-                    let other = compared(metric, point.ms, a, b, noise.scene)
+            for (i, (ta, a, ra)) in readings.iter().enumerate() {
+                for (tb, b, rb) in &readings[i + 1..] {
+                    let other = compared(metric, (a, ra.position), (b, rb.position), noise)
                         .filter(|(sa, sb)| comparable(sa) && comparable(sb));
-                    let (sa, sb) = other.as_ref().map_or((own_a, own_b), |(sa, sb)| (sa, sb));
+                    let (sa, sb) = other.as_ref().map_or((&ra.samples, &rb.samples), |(sa, sb)| (sa, sb));
                     if could_differ(sa, sb, seeds) {
                         found.push(TooClose {
                             scene: scene.to_string(),
@@ -344,14 +340,6 @@ fn comparable(s: &Samples) -> bool {
 /// A technique's error-against-cost curve: (cost, values by seed), in budget order.
 type Curve = Vec<(f64, Samples)>;
 
-/// The cost noise of a time point: at the point's share of the cost, and
-/// the scene's own ([`CostNoise::pooled`]).
-#[derive(Clone, Copy)]
-struct Noises {
-    point: CostNoise,
-    scene: CostNoise,
-}
-
 /// A run with its cost ([`Costs`]): the median, and by seed (its noise).
 struct Timed<'a> {
     run: &'a IndexEntry,
@@ -375,6 +363,16 @@ fn time_points<'a, 'b>(entries: &'b [Timed<'a>]) -> Vec<&'b Timed<'a>> {
     cheapest.into_values().collect()
 }
 
+/// A technique's value at a time point.
+struct Reading {
+    /// By seed.
+    samples: Samples,
+    /// The budget it is the result of (`None` when read between budgets).
+    spp: Option<u64>,
+    /// Where on its budgets it was read, in log spp.
+    position: f64,
+}
+
 /// Where a technique's value at a time point comes from: its runs (in
 /// budget order), and the budget whose cost is the point's within the
 /// noise, if one is; else its curve between the two budgets around the
@@ -385,30 +383,27 @@ struct Source<'a, 'b> {
 }
 
 impl<'a, 'b> Source<'a, 'b> {
-    /// The technique's values of `metric` at time `ms` by seed, and the
-    /// budget they are the result of (`None` when read between budgets).
-    fn value(&self, metric: &str, ms: f64) -> Option<(Samples, Option<u64>)> {
-        match self.budget {
-            Some(r) => Some((r.run.samples(metric), Some(r.run.spp))),
-            None => Some((interpolate(&self.curve(metric, |r| r.ms), ms)?, None)),
+    /// The technique's value of `metric` at time `ms`: its budget's, or
+    /// read off its curve between the two budgets around `ms` (as
+    /// [`interpolate`] reads it).
+    fn read(&self, metric: &str, ms: f64) -> Option<Reading> {
+        let log_spp = |r: &Timed| (r.run.spp as f64).ln();
+        if let Some(r) = self.budget {
+            return Some(Reading { samples: r.run.samples(metric), spp: Some(r.run.spp), position: log_spp(r) });
         }
+        let curve = self.curve(metric, |r| r.ms);
+        let (i, w) = bracket(&curve, ms)?;
+        let position = if w == 0.0 {
+            log_spp(self.runs[i])
+        } else {
+            log_spp(self.runs[i]) + w * (log_spp(self.runs[i + 1]) - log_spp(self.runs[i]))
+        };
+        Some(Reading { samples: blend(&curve, i, w), spp: None, position })
     }
 
     /// The technique's curve of `metric` against `x` (its cost, or its budget).
     fn curve(&self, metric: &str, x: impl Fn(&Timed) -> f64) -> Curve {
         self.runs.iter().map(|r| (x(r), r.run.samples(metric))).collect()
-    }
-
-    /// Where on its budgets the value at time `ms` is read, in log spp:
-    /// its budget's, or as far between the two budgets around `ms` as `ms`
-    /// is between their costs (in log–log, as [`interpolate`] reads it).
-    fn position(&self, metric: &str, ms: f64) -> Option<f64> {
-        if let Some(r) = self.budget {
-            return Some((r.run.spp as f64).ln());
-        }
-        let (i, w) = bracket(&self.curve(metric, |r| r.ms), ms)?;
-        let spp = |k: usize| (self.runs[k].run.spp as f64).ln();
-        Some(if w == 0.0 { spp(i) } else { spp(i) + w * (spp(i + 1) - spp(i)) })
     }
 
     /// The values of `metric` at `position` (log spp) on its budgets, seed
@@ -467,9 +462,10 @@ fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed, noise: CostNoise) ->
 }
 
 /// The values by seed that decide how two techniques compare in the cell
-/// of `metric` at time `ms`. Where their costs cannot be told apart at any
-/// budget the two values are read from or between ([`same_cost`] at the
-/// scene's `noise`, budget by budget), neither is the faster, so both are
+/// of `metric`, given where each was read ([`Reading::position`]). Where
+/// their costs cannot be told apart at any budget the two values are read
+/// from or between ([`same_cost`] at the scene's `noise`, budget by
+/// budget), neither is the faster, so both are
 /// read at one position on their budgets, the mean of their two (in log
 /// spp): what is left between them is their values, as at equal samples.
 /// Read at their own positions, two such techniques would differ by how
@@ -479,8 +475,12 @@ fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed, noise: CostNoise) ->
 /// costly 2 spp at a cheap technique's time points, was 0.3–2 % apart and
 /// placed apart in 12 of 14 such cells (AMD EPYC, 2026-12-07). `None`
 /// where each technique's own value decides.
-fn compared(metric: &str, ms: f64, a: &Source, b: &Source, noise: CostNoise) -> Option<(Samples, Samples)> {
-    let (pa, pb) = (a.position(metric, ms)?, b.position(metric, ms)?);
+fn compared(
+    metric: &str,
+    (a, pa): (&Source, f64),
+    (b, pb): (&Source, f64),
+    noise: CostNoise,
+) -> Option<(Samples, Samples)> {
     if pa == pb || !same_costs_around(a, b, pa.min(pb), pa.max(pb), noise) {
         return None;
     }
@@ -507,21 +507,25 @@ fn same_costs_around(a: &Source, b: &Source, low: f64, high: f64, noise: CostNoi
 /// outside the curve.
 pub fn interpolate(points: &[(f64, Samples)], t: f64) -> Option<Samples> {
     let (i, w) = bracket(points, t)?;
+    Some(blend(points, i, w))
+}
+
+/// The values of a curve `w` of the way from point `i` to the next, seed by
+/// seed (see [`interpolate`]); point `i`'s own when `w` is 0.
+fn blend(points: &[(f64, Samples)], i: usize, w: f64) -> Samples {
     if w == 0.0 {
-        return Some(points[i].1.clone());
+        return points[i].1.clone();
     }
     let (s0, s1) = (&points[i].1, &points[i + 1].1);
-    Some(
-        s0.iter()
-            .filter_map(|(seed, v0)| {
-                let v1 = s1.get(seed)?;
-                Some((
-                    *seed,
-                    if *v0 > 0.0 && *v1 > 0.0 { (v0.ln() + w * (v1.ln() - v0.ln())).exp() } else { v0 + w * (v1 - v0) },
-                ))
-            })
-            .collect(),
-    )
+    s0.iter()
+        .filter_map(|(seed, v0)| {
+            let v1 = s1.get(seed)?;
+            Some((
+                *seed,
+                if *v0 > 0.0 && *v1 > 0.0 { (v0.ln() + w * (v1.ln() - v0.ln())).exp() } else { v0 + w * (v1 - v0) },
+            ))
+        })
+        .collect()
 }
 
 /// Where `t` lies on a curve: the point at it (weight 0), else the first
