@@ -29,8 +29,8 @@
 //!   value there and ranks last, because it cannot give a result for that
 //!   cost. Two techniques whose costs cannot be told apart at the budgets
 //!   they are read from or between are compared at one point of their
-//!   budgets, not each at its own ([`compared`]): neither is the faster,
-//!   so what is left between them is their values.
+//!   budgets, not each at its own: neither is the faster, so what is left
+//!   between them is their values.
 //!
 //! [`stats::differ`]: crate::stats::differ
 //! [`stats::same_cost`]: crate::stats::same_cost
