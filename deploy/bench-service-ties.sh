@@ -18,7 +18,10 @@
 # below them at equal time ("–": a set left out of equal time for its
 # calibration), the seeds jobs of the season (whose runs and
 # what they cost), the scenes the runner measured again because the
-# machine was slow during them, and the minutes it took; then the counts.
+# machine was slow during them, the minutes it took, and whether the two
+# copies' runs had the same seeds (a seeds job given to one copy's run and
+# not the other's judges third techniques against them on different
+# seeds); then the counts.
 #
 #   [ROUNDS=N | COPIES=a,b] [MAX_SEEDS=M] [SCENES=a,b] [SPP=x,y] bash deploy/bench-service-ties.sh [REPETITIONS]   # default 20
 #
@@ -187,8 +190,12 @@ def measured_again(season):
             found += [f"{j['project']} {m.group(1)} {m.group(2)}×" for m in re.finditer(r"\] (\S+): the renderer ran at ([0-9.]+)×", log)]
     return ", ".join(found) or "none"
 
-print("| repetition | technique | copy a, copy b(, doubled) at equal spp | at equal time | copies tie at both | doubled below at equal time | renderer rate, slowest set / fastest | seeds jobs | measured again | min |")
-print("|---|---|---|---|---|---|---|---|---|---|")
+def seeds_by_run(set_id):
+    result = json.load(open(f"{work}/sets/{set_id}.json"))
+    return {(run["scene"], run["spp"]): sorted(r["seed"] for r in run["repeats"]) for run in result["runs"]}
+
+print("| repetition | technique | copy a, copy b(, doubled) at equal spp | at equal time | copies tie at both | doubled below at equal time | renderer rate, slowest set / fastest | seeds jobs | measured again | min | copies' seeds alike |")
+print("|---|---|---|---|---|---|---|---|---|---|---|")
 season = 1
 for repetition in range(1, repetitions + 1):
     started = time.time()
@@ -198,6 +205,7 @@ for repetition in range(1, repetitions + 1):
     board = wait_for(f"season {season}'s board", lambda: settled(season))
     json.dump(board, open(f"{work}/board-{repetition}.json", "w"))
     ranks = {s["technique"]: (s["mean_rank"], s["mean_rank_time"]) for s in board["standings"]}
+    set_of = {s["technique"]: s["result_id"] for s in board["standings"]}
     rate, seeds, again = disturbance(board), seeds_jobs(season), measured_again(season)
     minutes = (time.time() - started) / 60
     for label, group in groups.items():
@@ -208,9 +216,13 @@ for repetition in range(1, repetitions + 1):
         timed = None not in at_time
         tie = spp[0] == spp[1] and timed and at_time[0] == at_time[1]
         below = "–" if len(group) < 3 else "yes" if timed and at_time[2] > max(at_time[0], at_time[1]) else "NO"
-        print(f"| {repetition} | {label} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {below} | {rate} | {seeds} | {again} | {minutes:.1f} |", flush=True)
+        a, b = seeds_by_run(set_of[group[0]]), seeds_by_run(set_of[group[1]])
+        unlike = [f"{scene} {spp} spp: {len(a.get((scene, spp), []))} / {len(b.get((scene, spp), []))}" for scene, spp in sorted(set(a) | set(b)) if a.get((scene, spp)) != b.get((scene, spp))]
+        alike = "yes" if not unlike else "NO (" + "; ".join(unlike) + ")"
+        print(f"| {repetition} | {label} | {show(spp)} | {show(at_time)} | {'yes' if tie else 'NO'} | {below} | {rate} | {seeds} | {again} | {minutes:.1f} | {alike} |", flush=True)
 EOF
 echo
 awk -F'|' '/^\| [0-9]/ { n++; if ($6 ~ /yes/) tie++; if ($7 !~ /–/) { d++; if ($7 ~ /yes/) below++ }
+        if ($12 ~ /yes/) alike++
         if (!($2 in seen)) { seen[$2]; seasons++; if ($9 !~ /none/) seeds++; if ($10 !~ /none/) again++; minutes += $11 } }
-    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; seeds jobs in %d of %d seasons; scenes measured again in %d of %d; %.1f min per season\n", tie, n, below, d, seeds, seasons, again, seasons, minutes / seasons }' "$work/table.md"
+    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; copies given the same seeds in %d of %d; seeds jobs in %d of %d seasons; scenes measured again in %d of %d; %.1f min per season\n", tie, n, below, d, alike, n, seeds, seasons, again, seasons, minutes / seasons }' "$work/table.md"

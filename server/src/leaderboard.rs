@@ -687,10 +687,10 @@ fn assemble(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn set(id: &str, technique: &str) -> ResultSet {
+    pub(crate) fn set(id: &str, technique: &str) -> ResultSet {
         ResultSet {
             id: id.into(),
             technique: technique.into(),
@@ -749,7 +749,7 @@ mod tests {
     }
 
     /// A run repeated with seeds 0, 1, 2: MSE per seed, time to result per seed.
-    fn repeated(id: &str, scene: &str, spp: i64, mse: [f64; 3], time_ms: f64) -> StoredRun {
+    pub(crate) fn repeated(id: &str, scene: &str, spp: i64, mse: [f64; 3], time_ms: f64) -> StoredRun {
         let mut r = run(id, scene, Some(mse[0]), 0.5);
         r.spp = spp;
         r.repeats = mse

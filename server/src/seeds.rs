@@ -12,7 +12,9 @@
 //! The rule, written for users in sdk/README ("More seeds on the service"):
 //! - both sides of a tie get the same new seeds (the paired tests pair
 //!   runs by seed), twice as many as the better-seeded side has, up to
-//!   `max_seeds` per run;
+//!   `max_seeds` per run, and so do their runs' peers (sets whose run at
+//!   the scene and budget nothing tells apart from theirs: a third set is
+//!   then judged against both on the same seeds);
 //! - only sets ranked at equal time (published, visible, of the season's
 //!   runner class and calibration) whose project still exists, and runs
 //!   with two seeds or more (one seed has no spread to judge);
@@ -32,9 +34,9 @@ use fbksd_exchange::ranking::{too_close, RunKey};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// The seeds jobs a season's board asks for: per result set, its runs
-/// to make again. A tie waits while either side is in `waiting` (a seeds
-/// job of its is queued or running, or one failed through the technique,
-/// or was cancelled).
+/// to make again. A tie waits while either side, or a peer, is in
+/// `waiting` (a seeds job of its is queued or running, or one failed
+/// through the technique, or was cancelled).
 pub fn plan(
     sets: &[ResultSet],
     runs: &[StoredRun],
@@ -60,12 +62,13 @@ pub fn plan(
     let have = |key: &RunKey| seeds_by_run.get(key).copied().unwrap_or(0);
     let mut wanted: BTreeMap<RunKey, u32> = BTreeMap::new();
     for tie in too_close(&entries, max_seeds as usize) {
-        if tie.runs.iter().any(|k| waiting.contains(&k.technique)) {
+        let runs: Vec<RunKey> = tie.runs.into_iter().chain(tie.peers).collect();
+        if runs.iter().any(|k| waiting.contains(&k.technique)) {
             continue;
         }
-        let most = tie.runs.iter().map(&have).max().unwrap_or(0);
+        let most = runs.iter().map(&have).max().unwrap_or(0);
         let target = (2 * most).min(max_seeds);
-        for key in tie.runs {
+        for key in runs {
             let want = wanted.entry(key).or_default();
             *want = (*want).max(target);
         }
@@ -122,7 +125,7 @@ async fn queue(state: &AppState, set: &ResultSet, runs: &[MoreSeeds]) -> Result<
     let described: Vec<String> =
         runs.iter().map(|r| format!("{} at {} spp, seeds {}–{}", r.scene, r.spp, r.first, r.end - 1)).collect();
     let message = format!(
-        "more seeds for result set {}: a tie on the board rests on {} of its runs ({})",
+        "more seeds for result set {}: a tie on the board rests on {} of its runs, or on runs nothing tells apart from them ({})",
         set.id,
         runs.len(),
         described.join("; ")
@@ -275,4 +278,32 @@ pub async fn add_repeats(state: &AppState, job: &Job) -> Result<(), ServiceError
     tx.commit().await?;
     crate::jobs::append_log(&state.pool, &job.id, 0, "[fbksd] succeeded\n", i64::MAX).await?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::leaderboard::tests::{repeated, set};
+
+    #[test]
+    fn a_tie_gets_more_seeds_and_so_does_a_set_nothing_tells_apart_from_one_side() {
+        let sets = [set("a", "alpha"), set("twin", "alpha-again"), set("close", "gamma"), set("far", "delta")];
+        // "close" ties with "a" by less than three seeds can show, and is decided behind
+        // "twin", which ties with "a": given to "a" alone, seeds 3-5 would judge "close"
+        // against "a" on six seeds and against "twin" on three.
+        let runs = [
+            repeated("a", "s", 4, [1.0, 1.2, 0.9], 10.0),
+            repeated("twin", "s", 4, [1.05, 1.4, 0.89], 10.0),
+            repeated("close", "s", 4, [1.1, 1.45, 0.95], 10.0),
+            repeated("far", "s", 4, [3.0, 3.3, 2.9], 10.0),
+        ];
+        let plans = plan(&sets, &runs, None, 12, &BTreeSet::new());
+        let seeds_3_to_5 = [MoreSeeds { scene: "s".into(), spp: 4, first: 3, end: 6 }];
+        for id in ["a", "close", "twin"] {
+            assert_eq!(plans.get(id).map(Vec::as_slice), Some(&seeds_3_to_5[..]), "{id}: {plans:?}");
+        }
+        assert!(!plans.contains_key("far"), "{plans:?}");
+        // While the twin's seeds job runs, the tie waits for it.
+        assert!(plan(&sets, &runs, None, 12, &BTreeSet::from(["twin".to_string()])).is_empty());
+    }
 }

@@ -7,7 +7,7 @@ use fbksd_exchange::scenes::SceneMeta;
 use fbksd_manager::evaluation::{find_scenes, AnyMetric};
 use fbksd_manager::more_seeds::settle;
 use fbksd_manager::{Benchmark, Limits, Progress, RunRecord, RunStatus, SceneSpec, TechniqueSpec};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -228,7 +228,13 @@ fn describe(close: &TooClose) -> String {
         At::Time { ms, fastest, spp } => format!("{ms:.1} ms ({fastest} at {spp} spp)"),
     };
     let what = close.metric.as_deref().map_or("cost".to_string(), |m| m.to_string());
-    format!("{} {what} at {at}: {} ~ {}", close.scene, close.techniques[0], close.techniques[1])
+    let tie = format!("{} {what} at {at}: {} ~ {}", close.scene, close.techniques[0], close.techniques[1]);
+    let peers: BTreeSet<&str> = close.peers.iter().map(|k| k.technique.as_str()).collect();
+    if peers.is_empty() {
+        return tie;
+    }
+    // Their seeds follow the tie's, so a user sees why their runs are made again.
+    format!("{tie} (alike: {})", peers.into_iter().collect::<Vec<_>>().join(", "))
 }
 
 fn report(progress: Progress<'_>, live: bool) {

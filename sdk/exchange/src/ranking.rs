@@ -192,19 +192,7 @@ fn for_each_time_point<'a>(
     mut visit: impl FnMut(&'a str, &Timed<'a>, CostNoise, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),
 ) {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
-    let costs = Costs::of(runs);
-    let mut by_scene: BTreeMap<&str, Vec<Timed>> = BTreeMap::new();
-    for run in runs.iter().filter(|r| r.status == RunStatus::Ok) {
-        let by_seed = costs.by_seed(run);
-        let own = costs.own_by_seed(run);
-        let shares: Samples = by_seed.iter().filter(|(_, c)| **c > 0.0).map(|(s, c)| (*s, own[s] / c)).collect();
-        let timed = Timed { run, ms: median(&by_seed), by_seed, own, share: median(&shares) };
-        if timed.ms > 0.0 && timed.ms.is_finite() {
-            by_scene.entry(&run.scene).or_default().push(timed);
-        }
-    }
-    for (scene, mut entries) in by_scene {
-        entries.sort_by_key(|t| t.run.spp);
+    for (scene, entries) in timed_by_scene(runs) {
         let metrics: BTreeSet<&str> = entries.iter().flat_map(|t| t.run.metrics.keys().map(String::as_str)).collect();
         let budgets: Vec<(&str, Vec<&Timed>)> =
             techniques.iter().map(|t| (*t, entries.iter().filter(|e| e.run.technique == *t).collect())).collect();
@@ -216,6 +204,25 @@ fn for_each_time_point<'a>(
             visit(scene, point, scene_noise, &metrics, &sources);
         }
     }
+}
+
+/// Each scene's runs that have a cost ([`Costs`]), with it, in budget order.
+fn timed_by_scene(runs: &[IndexEntry]) -> BTreeMap<&str, Vec<Timed<'_>>> {
+    let costs = Costs::of(runs);
+    let mut by_scene: BTreeMap<&str, Vec<Timed>> = BTreeMap::new();
+    for run in runs.iter().filter(|r| r.status == RunStatus::Ok) {
+        let by_seed = costs.by_seed(run);
+        let own = costs.own_by_seed(run);
+        let shares: Samples = by_seed.iter().filter(|(_, c)| **c > 0.0).map(|(s, c)| (*s, own[s] / c)).collect();
+        let timed = Timed { run, ms: median(&by_seed), by_seed, own, share: median(&shares) };
+        if timed.ms > 0.0 && timed.ms.is_finite() {
+            by_scene.entry(&run.scene).or_default().push(timed);
+        }
+    }
+    for entries in by_scene.values_mut() {
+        entries.sort_by_key(|t| t.run.spp);
+    }
+    by_scene
 }
 
 /// A run of a results index: technique, scene and budget.
@@ -251,6 +258,11 @@ pub struct TooClose {
     pub techniques: [String; 2],
     /// The runs whose seeds decide it.
     pub runs: Vec<RunKey>,
+    /// Runs of other techniques that nothing tells apart from one of
+    /// `runs` (their peers, [`too_close`]): to be given the same seeds, so
+    /// that a third technique is judged against both on the same seeds.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub peers: Vec<RunKey>,
 }
 
 /// The ties that `seeds` seeds per run could break, at equal samples and at
@@ -259,7 +271,8 @@ pub struct TooClose {
 /// ([`could_differ`]), or a technique's budget is at a time point only
 /// because the noise cannot yet rule it out ([`could_cost_differ`]). The
 /// same program twice has equal values and never appears; nor does a tie
-/// already at `seeds` seeds.
+/// already at `seeds` seeds. Each tie names its runs' peers too
+/// ([`TooClose::peers`]).
 ///
 /// [`could_differ`]: crate::stats::could_differ
 /// [`could_cost_differ`]: crate::stats::could_cost_differ
@@ -282,6 +295,7 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
                         at: At::Spp { spp },
                         techniques: [a.technique.clone(), b.technique.clone()],
                         runs: vec![RunKey::of(a), RunKey::of(b)],
+                        peers: Vec::new(),
                     });
                 }
             }
@@ -298,6 +312,7 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
                         at: at.clone(),
                         techniques: [t.to_string(), point.run.technique.clone()],
                         runs: vec![RunKey::of(r.run), RunKey::of(point.run)],
+                        peers: Vec::new(),
                     });
                 }
             }
@@ -320,13 +335,53 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
                             at: at.clone(),
                             techniques: [ta.to_string(), tb.to_string()],
                             runs: a.runs(point.ms).chain(b.runs(point.ms)).map(RunKey::of).collect(),
+                            peers: Vec::new(),
                         });
                     }
                 }
             }
         }
     });
+    let peers = peers(runs);
+    for tie in &mut found {
+        let mut theirs: Vec<RunKey> =
+            tie.runs.iter().filter_map(|k| peers.get(k)).flatten().filter(|p| !tie.runs.contains(p)).cloned().collect();
+        theirs.sort();
+        theirs.dedup();
+        tie.peers = theirs;
+    }
     found
+}
+
+/// Each run's peers: the runs of other techniques at its scene and budget
+/// that nothing tells apart from it, neither their costs ([`same_cost`], at
+/// the scene's noise and the larger of the two runs' own-time shares) nor
+/// their values on any metric ([`differ`]). Where a tie is given more seeds,
+/// its runs' peers are given the same: a third technique is then judged
+/// against each of two such runs on the same seeds. Given to one copy of
+/// NL-means and not the other (12 seeds and 6, through the service, Intel
+/// Xeon, 2026-12-07), the box filters tied with one copy and ranked ahead
+/// of the other at the same point, and the copies were placed apart.
+fn peers(runs: &[IndexEntry]) -> BTreeMap<RunKey, Vec<RunKey>> {
+    let alike = |a: &Timed, b: &Timed, noise: CostNoise| {
+        let metrics: BTreeSet<&String> = a.run.metrics.keys().chain(b.run.metrics.keys()).collect();
+        same_cost(&a.by_seed, &b.by_seed, noise.at_share(a.share.max(b.share)))
+            && metrics.iter().all(|m| {
+                let (sa, sb) = (a.run.samples(m), b.run.samples(m));
+                comparable(&sa) && comparable(&sb) && !differ(&sa, &sb)
+            })
+    };
+    let mut peers: BTreeMap<RunKey, Vec<RunKey>> = BTreeMap::new();
+    for entries in timed_by_scene(runs).values() {
+        let noise = CostNoise::pooled(entries.iter().map(|t| &t.own));
+        for (i, a) in entries.iter().enumerate() {
+            for b in entries[i + 1..].iter().filter(|b| b.run.spp == a.run.spp && alike(a, b, noise)) {
+                peers.entry(RunKey::of(a.run)).or_default().push(RunKey::of(b.run));
+                peers.entry(RunKey::of(b.run)).or_default().push(RunKey::of(a.run));
+            }
+        }
+    }
+    peers
 }
 
 /// An equal-samples cell: scene, budget, metric.
@@ -1025,6 +1080,32 @@ mod tests {
         // Holey's 16 spp run lacks nothing: it ranks there, behind the negative values.
         let order: Vec<&str> = last.places.iter().map(|p| p.technique.as_str()).collect();
         assert_eq!(order, ["signed", "holey", "steady"]);
+    }
+
+    #[test]
+    fn a_ties_peers_are_named_so_that_a_third_technique_meets_both_on_the_same_seeds() {
+        // "twin" ties with "a" and is decided ahead of "close"; "a" only ties with
+        // "close", by less than three seeds can show. Given six seeds, "a" alone
+        // would meet "close" on six seeds and "twin" on three.
+        let costs = [10.0, 10.2, 9.9];
+        let runs = vec![
+            costly("a", "s", 4, &[1.0, 1.2, 0.9], &costs),
+            costly("twin", "s", 4, &[1.05, 1.4, 0.89], &costs),
+            costly("close", "s", 4, &[1.1, 1.45, 0.95], &costs),
+            // Tied with "a" in values, at twice the cost: no peer.
+            costly("pricey", "s", 4, &[1.02, 1.25, 0.88], &costs.map(|c| 2.0 * c)),
+            // The cost of "a", decided worse: no peer.
+            costly("far", "s", 4, &[3.0, 3.3, 2.9], &costs),
+        ];
+        let close = too_close(&runs, 6);
+        let key = |t: &str| RunKey { technique: t.into(), scene: "s".into(), spp: 4 };
+        let tie = close
+            .iter()
+            .find(|c| matches!(c.at, At::Spp { .. }) && c.techniques == ["a".to_string(), "close".to_string()])
+            .unwrap_or_else(|| panic!("{close:?}"));
+        assert_eq!(tie.runs, [key("a"), key("close")]);
+        assert_eq!(tie.peers, [key("twin")], "{tie:?}");
+        assert!(!close.iter().any(|c| c.techniques.contains(&"twin".to_string())), "{close:?}");
     }
 
     #[test]

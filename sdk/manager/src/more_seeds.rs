@@ -5,12 +5,13 @@
 //! A round computes the metrics, asks the ranking which ties are too close
 //! to call ([`fbksd_exchange::ranking::too_close`]: a difference in values,
 //! or a budget's cost against a time point, that the paired tests would
-//! decide at the cap's seeds if it held), and gives each run behind one
-//! twice its seeds, at most the cap. It stops when nothing is too close,
-//! or every run behind what is has the cap's seeds. Extra seeds are runs
-//! like the others: one that fails fails its run, as with `--repeats`. What it costs is the
-//! extra runs only: at most (cap / repeats − 1) times the runs behind the
-//! close ties, never a run of a decided cell.
+//! decide at the cap's seeds if it held), and gives each run behind one,
+//! and each of their peers (runs of other techniques that nothing tells
+//! apart from them), twice its seeds, at most the cap. It stops when
+//! nothing is too close, or every run behind what is has the cap's seeds.
+//! Extra seeds are runs like the others: one that fails fails its run, as
+//! with `--repeats`. What it costs is the extra runs only: at most (cap /
+//! repeats − 1) times the runs behind the close ties and their peers.
 
 use crate::benchmark::{Benchmark, Progress};
 use crate::evaluation::{compute, AnyMetric};
@@ -65,9 +66,11 @@ pub fn settle(
             .iter()
             .filter(|r| r.status == RunStatus::Ok)
             .filter_map(|r| {
-                let key = close.iter().flat_map(|c| &c.runs).find(|k| {
-                    (k.technique.as_str(), k.scene.as_str(), k.spp) == (r.technique.as_str(), r.scene.as_str(), r.spp)
-                })?;
+                let key =
+                    close.iter().flat_map(|c| c.runs.iter().chain(c.peers.iter().filter(|k| ours(k)))).find(|k| {
+                        (k.technique.as_str(), k.scene.as_str(), k.spp)
+                            == (r.technique.as_str(), r.scene.as_str(), r.spp)
+                    })?;
                 Some((key, r.repeats.len().max(1) as u32))
             })
             .collect();
