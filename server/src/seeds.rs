@@ -13,8 +13,9 @@
 //! - both sides of a tie get the same new seeds (the paired tests pair
 //!   runs by seed), twice as many as the better-seeded side has, up to
 //!   `max_seeds` per run, and so do their runs' peers (sets whose run at
-//!   the scene and budget nothing tells apart from theirs: a third set is
-//!   then judged against both on the same seeds);
+//!   the scene and budget nothing tells apart from theirs, directly or
+//!   through a chain of such runs: a third set is then judged against
+//!   both on the same seeds);
 //! - only sets ranked at equal time (published, visible, of the season's
 //!   runner class and calibration) whose project still exists, and runs
 //!   with two seeds or more (one seed has no spread to judge);

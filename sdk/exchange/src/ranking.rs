@@ -356,12 +356,16 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
 /// Each run's peers: the runs of other techniques at its scene and budget
 /// that nothing tells apart from it, neither their costs ([`same_cost`], at
 /// the scene's noise and the larger of the two runs' own-time shares) nor
-/// their values on any metric ([`differ`]). Where a tie is given more seeds,
-/// its runs' peers are given the same: a third technique is then judged
-/// against each of two such runs on the same seeds. Given to one copy of
-/// NL-means and not the other (12 seeds and 6, through the service, Intel
-/// Xeon, 2026-12-07), the box filters tied with one copy and ranked ahead
-/// of the other at the same point, and the copies were placed apart.
+/// their values on any metric ([`differ`]), directly or through a chain of
+/// such runs. Where a tie is given more seeds, its runs' peers are given
+/// the same: a third technique is then judged against each of two such
+/// runs on the same seeds. Given to one copy of NL-means and not the other
+/// (12 seeds and 6, through the service, Intel Xeon, 2026-12-07), the box
+/// filters tied with one copy and ranked ahead of the other at the same
+/// point, and the copies were placed apart. The chains matter because a
+/// cost at the edge of the noise is "the same" as one of two copies and
+/// not the other: there, NL-means's pass-through 1 spp pulled one copy of
+/// the C++ box filter into its seeds job and not the other (6 seeds and 12).
 fn peers(runs: &[IndexEntry]) -> BTreeMap<RunKey, Vec<RunKey>> {
     let alike = |a: &Timed, b: &Timed, noise: CostNoise| {
         let metrics: BTreeSet<&String> = a.run.metrics.keys().chain(b.run.metrics.keys()).collect();
@@ -374,10 +378,29 @@ fn peers(runs: &[IndexEntry]) -> BTreeMap<RunKey, Vec<RunKey>> {
     let mut peers: BTreeMap<RunKey, Vec<RunKey>> = BTreeMap::new();
     for entries in timed_by_scene(runs).values() {
         let noise = CostNoise::pooled(entries.iter().map(|t| &t.own));
-        for (i, a) in entries.iter().enumerate() {
-            for b in entries[i + 1..].iter().filter(|b| b.run.spp == a.run.spp && alike(a, b, noise)) {
-                peers.entry(RunKey::of(a.run)).or_default().push(RunKey::of(b.run));
-                peers.entry(RunKey::of(b.run)).or_default().push(RunKey::of(a.run));
+        let mut budgets: BTreeMap<u64, Vec<&Timed>> = BTreeMap::new();
+        for t in entries {
+            budgets.entry(t.run.spp).or_default().push(t);
+        }
+        for at_budget in budgets.values() {
+            // Each run's group, joined pair by pair.
+            let mut group: Vec<usize> = (0..at_budget.len()).collect();
+            for (i, a) in at_budget.iter().enumerate() {
+                for (j, b) in at_budget.iter().enumerate().skip(i + 1) {
+                    if group[i] != group[j] && alike(a, b, noise) {
+                        let (keep, merged) = (group[i], group[j]);
+                        group.iter_mut().filter(|g| **g == merged).for_each(|g| *g = keep);
+                    }
+                }
+            }
+            for (i, a) in at_budget.iter().enumerate() {
+                let theirs: Vec<RunKey> = (0..at_budget.len())
+                    .filter(|&j| j != i && group[j] == group[i])
+                    .map(|j| RunKey::of(at_budget[j].run))
+                    .collect();
+                if !theirs.is_empty() {
+                    peers.insert(RunKey::of(a.run), theirs);
+                }
             }
         }
     }
@@ -1092,6 +1115,10 @@ mod tests {
             costly("a", "s", 4, &[1.0, 1.2, 0.9], &costs),
             costly("twin", "s", 4, &[1.05, 1.4, 0.89], &costs),
             costly("close", "s", 4, &[1.1, 1.45, 0.95], &costs),
+            // A chain of costs: "slower" is the cost of "a" within the 2 % floor, and
+            // "slowest" the cost of "slower", not of "a"; the same values as "a".
+            costly("slower", "s", 4, &[1.0, 1.2, 0.9], &costs.map(|c| 1.015 * c)),
+            costly("slowest", "s", 4, &[1.0, 1.2, 0.9], &costs.map(|c| 1.03 * c)),
             // Tied with "a" in values, at twice the cost: no peer.
             costly("pricey", "s", 4, &[1.02, 1.25, 0.88], &costs.map(|c| 2.0 * c)),
             // The cost of "a", decided worse: no peer.
@@ -1104,7 +1131,7 @@ mod tests {
             .find(|c| matches!(c.at, At::Spp { .. }) && c.techniques == ["a".to_string(), "close".to_string()])
             .unwrap_or_else(|| panic!("{close:?}"));
         assert_eq!(tie.runs, [key("a"), key("close")]);
-        assert_eq!(tie.peers, [key("twin")], "{tie:?}");
+        assert_eq!(tie.peers, [key("slower"), key("slowest"), key("twin")], "{tie:?}");
         assert!(!close.iter().any(|c| c.techniques.contains(&"twin".to_string())), "{close:?}");
     }
 
