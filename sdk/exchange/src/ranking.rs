@@ -27,10 +27,11 @@
 //!   the two budgets around the point), seed by seed, never extrapolated: a
 //!   technique whose smallest budget costs more, beyond the noise, has no
 //!   value there and ranks last, because it cannot give a result for that
-//!   cost. Two techniques whose costs cannot be told apart at the budgets
-//!   they are read from or between are compared at one point of their
-//!   budgets, not each at its own: neither is the faster, so what is left
-//!   between them is their values.
+//!   cost. Techniques whose costs cannot be told apart at the budgets
+//!   they are read from or between (directly or through a chain of such
+//!   techniques) are all read at one point of their budgets, not each at
+//!   its own, for every comparison and for the value shown: none of them
+//!   is the faster, so what is left between them is their values.
 //!
 //! [`stats::differ`]: crate::stats::differ
 //! [`stats::same_cost`]: crate::stats::same_cost
@@ -144,7 +145,7 @@ pub fn equal_spp(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) ->
     let cells = cells
         .into_iter()
         .map(|((scene, spp, metric), values)| {
-            place(scene, metric, At::Spp { spp }, values, &techniques, lower_is_better(metric), |_, _| None)
+            place(scene, metric, At::Spp { spp }, values, &techniques, lower_is_better(metric))
         })
         .collect();
     standings(&techniques, cells)
@@ -158,24 +159,12 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
     let mut cells = Vec::new();
     for_each_time_point(runs, |scene, point, noise, metrics, sources| {
         for &metric in metrics {
-            let readings: Vec<(&str, &Source, Reading)> =
-                sources.iter().filter_map(|(t, source)| Some((*t, source, source.read(metric, point.ms)?))).collect();
+            let readings = read_all(sources, metric, point.ms, noise);
             let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
-            let reading = |t: &str| readings.iter().find(|(name, ..)| *name == t);
-            let mut cell = place(
-                scene,
-                metric,
-                at,
-                readings.iter().map(|(t, _, r)| (*t, r.samples.clone())).collect(),
-                &techniques,
-                lower_is_better(metric),
-                |a, b| {
-                    let ((_, a, ra), (_, b, rb)) = (reading(a)?, reading(b)?);
-                    compared(metric, (a, ra.position), (b, rb.position), noise)
-                },
-            );
+            let values = readings.iter().map(|(t, _, r)| (*t, r.samples.clone())).collect();
+            let mut cell = place(scene, metric, at, values, &techniques, lower_is_better(metric));
             for p in &mut cell.places {
-                p.spp = reading(&p.technique).and_then(|(.., r)| r.spp);
+                p.spp = readings.iter().find(|(t, ..)| *t == p.technique).and_then(|(.., r)| r.spp);
             }
             cells.push(cell);
         }
@@ -318,17 +307,11 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
             }
         }
         for &metric in metrics {
-            let readings: Vec<(&str, &Source, Reading)> = sources
-                .iter()
-                .filter_map(|(t, source)| Some((*t, source, source.read(metric, point.ms)?)))
-                .filter(|(.., r)| comparable(&r.samples))
-                .collect();
+            let mut readings = read_all(sources, metric, point.ms, noise);
+            readings.retain(|(.., r)| comparable(&r.samples));
             for (i, (ta, a, ra)) in readings.iter().enumerate() {
                 for (tb, b, rb) in &readings[i + 1..] {
-                    let other = compared(metric, (a, ra.position), (b, rb.position), noise)
-                        .filter(|(sa, sb)| comparable(sa) && comparable(sb));
-                    let (sa, sb) = other.as_ref().map_or((&ra.samples, &rb.samples), |(sa, sb)| (sa, sb));
-                    if could_differ(sa, sb, seeds) {
+                    if could_differ(&ra.samples, &rb.samples, seeds) {
                         found.push(TooClose {
                             scene: scene.to_string(),
                             metric: Some(metric.to_string()),
@@ -383,16 +366,7 @@ fn peers(runs: &[IndexEntry]) -> BTreeMap<RunKey, Vec<RunKey>> {
             budgets.entry(t.run.spp).or_default().push(t);
         }
         for at_budget in budgets.values() {
-            // Each run's group, joined pair by pair.
-            let mut group: Vec<usize> = (0..at_budget.len()).collect();
-            for (i, a) in at_budget.iter().enumerate() {
-                for (j, b) in at_budget.iter().enumerate().skip(i + 1) {
-                    if group[i] != group[j] && alike(a, b, noise) {
-                        let (keep, merged) = (group[i], group[j]);
-                        group.iter_mut().filter(|g| **g == merged).for_each(|g| *g = keep);
-                    }
-                }
-            }
+            let group = groups(at_budget.len(), |i, j| alike(at_budget[i], at_budget[j], noise));
             for (i, a) in at_budget.iter().enumerate() {
                 let theirs: Vec<RunKey> = (0..at_budget.len())
                     .filter(|&j| j != i && group[j] == group[i])
@@ -405,6 +379,21 @@ fn peers(runs: &[IndexEntry]) -> BTreeMap<RunKey, Vec<RunKey>> {
         }
     }
     peers
+}
+
+/// Each of `n` items' group, where `joined` items are in one group, and so
+/// are chains of them: the label of the group's first item.
+fn groups(n: usize, joined: impl Fn(usize, usize) -> bool) -> Vec<usize> {
+    let mut group: Vec<usize> = (0..n).collect();
+    for i in 0..n {
+        for j in i + 1..n {
+            if group[i] != group[j] && joined(i, j) {
+                let (keep, merged) = (group[i].min(group[j]), group[i].max(group[j]));
+                group.iter_mut().filter(|g| **g == merged).for_each(|g| *g = keep);
+            }
+        }
+    }
+    group
 }
 
 /// An equal-samples cell: scene, budget, metric.
@@ -484,13 +473,14 @@ impl<'a, 'b> Source<'a, 'b> {
         self.runs.iter().map(|r| (x(r), r.run.samples(metric))).collect()
     }
 
-    /// The values of `metric` at `position` (log spp) on its budgets, seed
-    /// by seed, in log–log between the two budgets around it.
-    fn at_position(&self, metric: &str, position: f64) -> Option<Samples> {
+    /// The technique's value of `metric` at `position` (log spp) on its
+    /// budgets, seed by seed, in log–log between the two budgets around it.
+    fn read_at_position(&self, metric: &str, position: f64) -> Option<Reading> {
         let spp = position.exp();
         // A budget's own position, not a hair beside it.
-        let spp = self.runs.iter().map(|r| r.run.spp as f64).find(|s| (s - spp).abs() <= 1e-9 * s).unwrap_or(spp);
-        interpolate(&self.curve(metric, |r| r.run.spp as f64), spp)
+        let budget = self.runs.iter().map(|r| r.run.spp).find(|s| (*s as f64 - spp).abs() <= 1e-9 * *s as f64);
+        let samples = interpolate(&self.curve(metric, |r| r.run.spp as f64), budget.map_or(spp, |s| s as f64))?;
+        Some(Reading { samples, spp: budget, position })
     }
 
     /// Its runs from the budget at or below `low` to the one at or above
@@ -539,31 +529,50 @@ fn source<'a, 'b>(runs: &'b [&'b Timed<'a>], point: &Timed, noise: CostNoise) ->
     (first.min(last) < point.ms && point.ms < first.max(last)).then_some(Source { runs, budget: None })
 }
 
-/// The values by seed that decide how two techniques compare in the cell
-/// of `metric`, given where each was read ([`Reading::position`]). Where
-/// their costs cannot be told apart at any budget the two values are read
-/// from or between ([`same_cost`] at the scene's `noise`, budget by
-/// budget), neither is the faster, so both are
-/// read at one position on their budgets, the mean of their two (in log
-/// spp): what is left between them is their values, as at equal samples.
-/// Read at their own positions, two such techniques would differ by how
-/// far each one's cost offset moved it between its budgets, alike on every
-/// seed, which the paired test takes for a difference: the same NL-means
-/// twice, through the service, read between its pass-through 1 spp and its
-/// costly 2 spp at a cheap technique's time points, was 0.3–2 % apart and
-/// placed apart in 12 of 14 such cells (AMD EPYC, 2026-12-07). `None`
-/// where each technique's own value decides.
-fn compared(
+/// Every technique's value of `metric` at time `ms` ([`Source::read`]),
+/// techniques of one cost read at one point of their budgets. Techniques
+/// whose costs cannot be told apart at each budget they are read from or
+/// between ([`same_cost`] at the scene's `noise`, budget by budget),
+/// directly or through a chain of such techniques, are one group: none of
+/// them is the faster, so each is read at the mean of their positions (in
+/// log spp), and what is left between them, and between each of them and
+/// any other technique, is their values. Read each at its own position, two
+/// such techniques would differ by how far each one's cost offset moved it
+/// between its budgets, alike on every seed, which the paired test takes
+/// for a difference: the same NL-means twice, through the service, read
+/// between its pass-through 1 spp and its costly 2 spp at a cheap
+/// technique's time points, was 0.3–2 % apart and placed apart in 12 of 14
+/// such cells (AMD EPYC, 2026-12-07). Compared at one point with each
+/// other but each at its own with the box filters, one copy tied with them
+/// and the other ranked behind, in 3 of 3 seasons (Intel Xeon,
+/// 2026-12-07): ties do not chain, so a group is read at one point for
+/// every comparison.
+fn read_all<'s, 'a, 'b>(
+    sources: &'s [(&'a str, Source<'a, 'b>)],
     metric: &str,
-    (a, pa): (&Source, f64),
-    (b, pb): (&Source, f64),
+    ms: f64,
     noise: CostNoise,
-) -> Option<(Samples, Samples)> {
-    if pa == pb || !same_costs_around(a, b, pa.min(pb), pa.max(pb), noise) {
-        return None;
+) -> Vec<(&'a str, &'s Source<'a, 'b>, Reading)> {
+    let mut readings: Vec<(&str, &Source, Reading)> =
+        sources.iter().filter_map(|(t, source)| Some((*t, source, source.read(metric, ms)?))).collect();
+    let group = groups(readings.len(), |i, j| {
+        let ((_, a, ra), (_, b, rb)) = (&readings[i], &readings[j]);
+        same_costs_around(a, b, ra.position.min(rb.position), ra.position.max(rb.position), noise)
+    });
+    for label in group.iter().copied().collect::<BTreeSet<usize>>() {
+        let members: Vec<usize> = (0..readings.len()).filter(|&i| group[i] == label).collect();
+        if members.len() < 2 {
+            continue;
+        }
+        let common = members.iter().map(|&i| readings[i].2.position).sum::<f64>() / members.len() as f64;
+        let read: Option<Vec<Reading>> =
+            members.iter().map(|&i| readings[i].1.read_at_position(metric, common)).collect();
+        // Seeds that do not pair between budgets leave each at its own reading.
+        for (i, reading) in members.into_iter().zip(read.into_iter().flatten()) {
+            readings[i].2 = reading;
+        }
     }
-    let common = (pa + pb) / 2.0;
-    Some((a.at_position(metric, common)?, b.at_position(metric, common)?))
+    readings
 }
 
 /// Whether two techniques have the same budgets from the one at or below
@@ -625,18 +634,8 @@ fn bracket(points: &[(f64, Samples)], t: f64) -> Option<(usize, f64)> {
         })
 }
 
-/// Places the techniques of one cell by their values, or, for a pair of
-/// techniques `compared` has other values for (`compared(a, b)`: a's and
-/// b's), by those.
-fn place(
-    scene: &str,
-    metric: &str,
-    at: At,
-    values: Vec<CellValues>,
-    techniques: &BTreeSet<&str>,
-    lower: bool,
-    compared: impl Fn(&str, &str) -> Option<(Samples, Samples)>,
-) -> Cell {
+/// Places the techniques of one cell by their values.
+fn place(scene: &str, metric: &str, at: At, values: Vec<CellValues>, techniques: &BTreeSet<&str>, lower: bool) -> Cell {
     let (values, _): (Vec<_>, Vec<_>) = values.into_iter().partition(|(_, s)| comparable(s));
     let means: Vec<f64> = values.iter().map(|(_, s)| mean(s)).collect();
     let better = |a: f64, b: f64| if lower { a < b } else { a > b };
@@ -645,11 +644,9 @@ fn place(
             let mut ahead = 0;
             let mut tied_with = Vec::new();
             for j in (0..values.len()).filter(|&j| j != i) {
-                let pair = compared(values[i].0, values[j].0).filter(|(a, b)| comparable(a) && comparable(b));
-                let (own, other) = pair.as_ref().map_or((&values[i].1, &values[j].1), |(a, b)| (a, b));
-                if !differ(own, other) {
+                if !differ(&values[i].1, &values[j].1) {
                     tied_with.push(values[j].0.to_string());
-                } else if better(mean(other), mean(own)) {
+                } else if better(means[j], means[i]) {
                     ahead += 1;
                 }
             }
@@ -984,7 +981,11 @@ mod tests {
         for cell in &time.cells[1..] {
             let (a, b) = (place(cell, "nlm-a"), place(cell, "nlm-b"));
             assert_eq!((a.spp, b.spp), (None, None), "read between budgets: {cell:?}");
-            assert!(a.mean != b.mean, "each at its own point of its curve: {cell:?}");
+            // Read at one point of their budgets, for every comparison: the same values,
+            // so every other technique meets both alike.
+            assert_eq!(a.mean, b.mean, "{cell:?}");
+            let others = |p: &Place| p.tied_with.iter().filter(|t| !t.starts_with("nlm-")).cloned().collect::<Vec<_>>();
+            assert_eq!(others(&a), others(&b), "{cell:?}");
             assert_eq!(a.place, b.place, "{cell:?}");
             assert!(a.tied_with.contains(&"nlm-b".to_string()), "{cell:?}");
             // What is left between techniques of one cost is their values.
