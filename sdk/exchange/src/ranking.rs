@@ -157,7 +157,7 @@ pub fn equal_spp(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) ->
 pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -> Ranking {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
     let mut cells = Vec::new();
-    for_each_time_point(runs, |scene, point, noise, metrics, sources| {
+    for_each_time_point(runs, &timed_by_scene(runs), |scene, point, noise, metrics, sources| {
         for &metric in metrics {
             let readings = read_all(sources, metric, point.ms, noise);
             let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
@@ -172,21 +172,22 @@ pub fn equal_time(runs: &[IndexEntry], lower_is_better: impl Fn(&str) -> bool) -
     standings(&techniques, cells)
 }
 
-/// Calls `visit` with every time point of every scene: the scene, the
-/// point, the scene's cost noise ([`CostNoise::pooled`]), its metrics, and
-/// where each technique's value there comes from (techniques with no value
-/// there left out).
+/// Calls `visit` with every time point of every scene of `scenes` (the
+/// runs' [`timed_by_scene`]): the scene, the point, the scene's cost noise
+/// ([`CostNoise::pooled`]), its metrics, and where each technique's value
+/// there comes from (techniques with no value there left out).
 fn for_each_time_point<'a>(
     runs: &'a [IndexEntry],
+    scenes: &BTreeMap<&'a str, Vec<Timed<'a>>>,
     mut visit: impl FnMut(&'a str, &Timed<'a>, CostNoise, &BTreeSet<&'a str>, &[(&'a str, Source<'a, '_>)]),
 ) {
     let techniques: BTreeSet<&str> = runs.iter().map(|r| r.technique.as_str()).collect();
-    for (scene, entries) in timed_by_scene(runs) {
+    for (&scene, entries) in scenes {
         let metrics: BTreeSet<&str> = entries.iter().flat_map(|t| t.run.metrics.keys().map(String::as_str)).collect();
         let budgets: Vec<(&str, Vec<&Timed>)> =
             techniques.iter().map(|t| (*t, entries.iter().filter(|e| e.run.technique == *t).collect())).collect();
         let scene_noise = CostNoise::pooled(entries.iter().map(|t| &t.own));
-        for point in time_points(&entries) {
+        for point in time_points(entries) {
             let noise = scene_noise.at_share(point.share);
             let sources: Vec<(&str, Source)> =
                 budgets.iter().filter_map(|(t, runs)| Some((*t, source(runs, point, noise)?))).collect();
@@ -290,7 +291,8 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
             }
         }
     }
-    for_each_time_point(runs, |scene, point, noise, metrics, sources| {
+    let scenes = timed_by_scene(runs);
+    for_each_time_point(runs, &scenes, |scene, point, noise, metrics, sources| {
         let at = At::Time { ms: point.ms, fastest: point.run.technique.clone(), spp: point.run.spp };
         for (t, source) in sources {
             if let Some(r) = source.budget {
@@ -325,7 +327,7 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
             }
         }
     });
-    let peers = peers(runs);
+    let peers = peers(&scenes);
     for tie in &mut found {
         let mut theirs: Vec<RunKey> =
             tie.runs.iter().filter_map(|k| peers.get(k)).flatten().filter(|p| !tie.runs.contains(p)).cloned().collect();
@@ -349,7 +351,7 @@ pub fn too_close(runs: &[IndexEntry], seeds: usize) -> Vec<TooClose> {
 /// cost at the edge of the noise is "the same" as one of two copies and
 /// not the other: there, NL-means's pass-through 1 spp pulled one copy of
 /// the C++ box filter into its seeds job and not the other (6 seeds and 12).
-fn peers(runs: &[IndexEntry]) -> BTreeMap<RunKey, Vec<RunKey>> {
+fn peers(scenes: &BTreeMap<&str, Vec<Timed>>) -> BTreeMap<RunKey, Vec<RunKey>> {
     let alike = |a: &Timed, b: &Timed, noise: CostNoise| {
         let metrics: BTreeSet<&String> = a.run.metrics.keys().chain(b.run.metrics.keys()).collect();
         same_cost(&a.by_seed, &b.by_seed, noise.at_share(a.share.max(b.share)))
@@ -359,7 +361,7 @@ fn peers(runs: &[IndexEntry]) -> BTreeMap<RunKey, Vec<RunKey>> {
             })
     };
     let mut peers: BTreeMap<RunKey, Vec<RunKey>> = BTreeMap::new();
-    for entries in timed_by_scene(runs).values() {
+    for entries in scenes.values() {
         let noise = CostNoise::pooled(entries.iter().map(|t| &t.own));
         let mut budgets: BTreeMap<u64, Vec<&Timed>> = BTreeMap::new();
         for t in entries {
