@@ -18,7 +18,8 @@
 # below them at equal time ("–": a set left out of equal time for its
 # calibration), the seeds jobs of the season (whose runs and
 # what they cost), the scenes the runner measured again because the
-# machine was slow during them, the minutes it took, and whether the two
+# machine was slow during them and the sets the service measured again for
+# their runner's calibration, the minutes it took, and whether the two
 # copies' runs had the same seeds (a seeds job given to one copy's run and
 # not the other's judges third techniques against them on different
 # seeds); then the counts.
@@ -188,6 +189,10 @@ def measured_again(season):
         if j["season"] == season and j["kind"] in ("benchmark", "seeds"):
             log = "".join(c["text"] for c in call("GET", f"/api/v1/jobs/{j['id']}/log", token=token)[0]["chunks"])
             found += [f"{j['project']} {m.group(1)} {m.group(2)}×" for m in re.finditer(r"\] (\S+): the renderer ran at ([0-9.]+)×", log)]
+        if j["season"] == season and j.get("measures_again"):
+            # A set the service measured again for its runner's calibration (server/src/measure_again.rs).
+            drift = re.search(r"class's \(([^)]*)\)", j["message"])
+            found.append(f"{j['project']}'s set ({drift.group(1) if drift else 'calibration'}: {j['state']})")
     return ", ".join(found) or "none"
 
 def seeds_by_run(set_id):
@@ -225,4 +230,4 @@ echo
 awk -F'|' '/^\| [0-9]/ { n++; if ($6 ~ /yes/) tie++; if ($7 !~ /–/) { d++; if ($7 ~ /yes/) below++ }
         if ($12 ~ /yes/) alike++
         if (!($2 in seen)) { seen[$2]; seasons++; if ($9 !~ /none/) seeds++; if ($10 !~ /none/) again++; minutes += $11 } }
-    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; copies given the same seeds in %d of %d; seeds jobs in %d of %d seasons; scenes measured again in %d of %d; %.1f min per season\n", tie, n, below, d, alike, n, seeds, seasons, again, seasons, minutes / seasons }' "$work/table.md"
+    END { printf "copies tied at equal spp and at equal time in %d of %d; doubled ranked below them at equal time in %d of %d; copies given the same seeds in %d of %d; seeds jobs in %d of %d seasons; scenes or sets measured again in %d of %d; %.1f min per season\n", tie, n, below, d, alike, n, seeds, seasons, again, seasons, minutes / seasons }' "$work/table.md"

@@ -164,21 +164,20 @@ impl Application {
                 tokio::time::sleep(std::time::Duration::from_secs(3600)).await;
             }
         });
-        // Ties on the board that more seeds could settle get seeds jobs,
-        // each time the board changes (a publish here, on another
-        // instance, or a seeds job's repeats added).
-        if config.max_seeds > 0 {
-            let planner = state.clone();
-            tokio::spawn(async move {
-                let mut planned = None;
-                loop {
-                    if let Err(e) = crate::seeds::plan_if_changed(&planner, &mut planned).await {
-                        tracing::warn!("planning more seeds: {}", e.message);
-                    }
-                    tokio::time::sleep(std::time::Duration::from_secs(2)).await;
+        // Each time the board changes (a publish here, on another instance,
+        // or a seeds job's repeats added), ties that more seeds could settle
+        // get seeds jobs, and sets measured off their runner class's
+        // calibration are measured again.
+        let planner = state.clone();
+        tokio::spawn(async move {
+            let mut planned = None;
+            loop {
+                if let Err(e) = crate::planner::plan_if_changed(&planner, &mut planned).await {
+                    tracing::warn!("planning the board's jobs: {}", e.message);
                 }
-            });
-        }
+                tokio::time::sleep(std::time::Duration::from_secs(2)).await;
+            }
+        });
         let metrics = if config.metrics_bind.is_empty() {
             None
         } else {

@@ -68,6 +68,10 @@ pub struct Job {
     /// The runs it makes again, and their seeds (seeds jobs).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub more_seeds: Vec<MoreSeeds>,
+    /// The published result set it measures again (benchmarks of a set
+    /// measured off its class's calibration: [`crate::measure_again`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub measures_again: Option<String>,
 }
 
 /// A seeds job's run (shared with the runner).
@@ -92,7 +96,7 @@ pub fn hide_result(text: &str, id: &str) -> String {
 
 const JOB_COLUMNS: &str = "j.id, j.pipeline_id, j.project_id, p.name AS project_name, j.user_id, j.kind, j.state, \
      j.failure_reason, j.message, j.attempts, j.max_attempts, j.runner_id, pl.commit_sha, j.season, j.created_at, \
-     j.started_at, j.finished_at, r.id AS result_id, j.reference_key, j.more_seeds_of, j.more_seeds";
+     j.started_at, j.finished_at, r.id AS result_id, j.reference_key, j.more_seeds_of, j.more_seeds, j.measures_again";
 const JOB_FROM: &str = "jobs j JOIN projects p ON p.id = j.project_id JOIN pipelines pl ON pl.id = j.pipeline_id \
      LEFT JOIN result_sets r ON r.job_id = j.id";
 
@@ -123,6 +127,7 @@ fn job_of(row: &sqlx::any::AnyRow) -> Result<Job, sqlx::Error> {
             .map(|json| serde_json::from_str(&json).map_err(|e| sqlx::Error::Decode(Box::new(e))))
             .transpose()?
             .unwrap_or_default(),
+        measures_again: row.try_get("measures_again")?,
     })
 }
 
@@ -526,7 +531,8 @@ pub struct NewJob<'a> {
     pub max_attempts: i64,
     /// The season it runs for.
     pub season: i64,
-    /// Publish the result set when it succeeds (season re-runs).
+    /// Publish the result set when it succeeds (season re-runs, and sets
+    /// measured again).
     pub publish_on_success: bool,
     /// Whether it uses up one of the day's runs.
     pub counts_for_quota: bool,
@@ -536,6 +542,8 @@ pub struct NewJob<'a> {
     pub reference_key: Option<&'a str>,
     /// The published set it adds seeds to, and the runs (seeds jobs).
     pub more_seeds: Option<(&'a str, &'a [MoreSeeds])>,
+    /// The published set it measures again (benchmarks).
+    pub measures_again: Option<&'a str>,
 }
 
 /// Creates a job in its pipeline's transaction.
@@ -543,8 +551,8 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewJob<'_>)
     sqlx::query(
         "INSERT INTO jobs (id, pipeline_id, project_id, user_id, kind, state, failure_reason, message, attempts, \
          max_attempts, season, publish_on_success, counts_for_quota, log_bytes, upload_bytes, created_at, finished_at, \
-         reference_key, more_seeds_of, more_seeds) \
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14, $15, $16, $17)",
+         reference_key, more_seeds_of, more_seeds, measures_again) \
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, 0, $9, $10, $11, $12, 0, 0, $13, $14, $15, $16, $17, $18)",
     )
     .bind(new.id)
     .bind(new.pipeline_id)
@@ -563,6 +571,7 @@ pub async fn insert(tx: &mut sqlx::Transaction<'_, sqlx::Any>, new: &NewJob<'_>)
     .bind(new.reference_key)
     .bind(new.more_seeds.map(|(set, _)| set))
     .bind(new.more_seeds.map(|(_, runs)| serde_json::to_string(runs).unwrap_or_default()))
+    .bind(new.measures_again)
     .execute(&mut **tx)
     .await?;
     Ok(())

@@ -371,6 +371,7 @@ pub async fn start(
         finished_at: finished,
         reference_key: None,
         more_seeds: None,
+        measures_again: None,
     };
     crate::jobs::insert(&mut tx, &new_job).await?;
     tx.commit().await?;
@@ -595,7 +596,16 @@ async fn end_job(
             let url = format!("{}/results/{result_id}", state.public_url);
             crate::jobs::append_log(&state.pool, job_id, attempt, &format!("[fbksd] private results: {url}\n"), i64::MAX)
                 .await?;
-            if let Some(owner) = owner {
+            if let Some(old) = &job.measures_again {
+                // The service asked for it, not the owner: no mail.
+                let published = crate::results::get(&state.pool, &result_id).await?.is_some_and(|s| s.is_public());
+                let note = if published {
+                    format!("[fbksd] published in the place of result set {old}\n")
+                } else {
+                    format!("[fbksd] kept private: result set {old} is no longer published\n")
+                };
+                crate::jobs::append_log(&state.pool, job_id, attempt, &note, i64::MAX).await?;
+            } else if let Some(owner) = owner {
                 let body = format!(
                     "The benchmark of {} at commit {} is done.\n\nYour private results: {url}\n\n\
                      Publish them from that page, or with FBKSD_PUBLISH={result_id}.\n",
@@ -654,10 +664,13 @@ async fn end_job(
 /// the job; the files move under it (a retry finds them there); the shared
 /// references are kept; then the set and the job's end commit together.
 async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<String, ServiceError> {
-    let (staged, publish) = crate::jobs::staged_results(&state.pool, &job.id).await?;
+    let (staged, mut publish) = crate::jobs::staged_results(&state.pool, &job.id).await?;
     let staged = staged.ok_or_else(|| {
         ServiceError::conflict("no_results", "upload the results (PUT …/results) before reporting success")
     })?;
+    if let Some(old) = &job.measures_again {
+        publish &= crate::measure_again::still_published(state, old).await?;
+    }
     let upload: crate::results::Upload = serde_json::from_str(&staged).map_err(ServiceError::internal)?;
     let info = match sanity_check(
         state,

@@ -220,6 +220,7 @@ async fn queue_job(state: &AppState, key: &str, scene: &str, failed_job: Option<
         finished_at: None,
         reference_key: Some(key),
         more_seeds: None,
+        measures_again: None,
     };
     crate::jobs::insert(&mut tx, &job).await?;
     let claimed = match failed_job {

@@ -90,15 +90,8 @@ fn seeds_of(run: &StoredRun) -> u32 {
     run.repeats.iter().map(|r| r.seed as u32 + 1).max().unwrap_or(1)
 }
 
-/// Plans the current season's board if it changed since `planned` (the
-/// board version last planned), queueing its seeds jobs.
-pub async fn plan_if_changed(state: &AppState, planned: &mut Option<i64>) -> Result<(), ServiceError> {
-    let version = state.boards.version(&state.pool).await?;
-    if *planned == Some(version) {
-        return Ok(());
-    }
-    let season = crate::results::current_season(&state.pool).await?;
-    let data = state.boards.season(&state.pool, season).await?;
+/// Queues the seeds jobs the board of a season (`data`) asks for.
+pub async fn queue_for(state: &AppState, data: &crate::leaderboard::SeasonData) -> Result<(), ServiceError> {
     let waiting: BTreeSet<String> = sqlx::query_scalar::<_, Option<String>>(
         "SELECT DISTINCT more_seeds_of FROM jobs WHERE kind = 'seeds' \
          AND (state IN ('queued', 'running', 'cancelled') OR (state = 'failed' AND failure_reason <> 'infrastructure_error'))",
@@ -113,16 +106,11 @@ pub async fn plan_if_changed(state: &AppState, planned: &mut Option<i64>) -> Res
         let Some(set) = data.sets.iter().find(|s| s.id == set_id) else { continue };
         queue(state, set, &runs).await?;
     }
-    *planned = Some(version);
     Ok(())
 }
 
 /// Queues a seeds job for `set`'s `runs`.
 async fn queue(state: &AppState, set: &ResultSet, runs: &[MoreSeeds]) -> Result<(), ServiceError> {
-    let (Some(project_id), Some(user_id)) = (set.project_id.as_deref(), set.user_id.as_deref()) else {
-        return Ok(());
-    };
-    let (pipeline_id, job_id) = (uuid::Uuid::new_v4().to_string(), uuid::Uuid::new_v4().to_string());
     let described: Vec<String> =
         runs.iter().map(|r| format!("{} at {} spp, seeds {}–{}", r.scene, r.spp, r.first, r.end - 1)).collect();
     let message = format!(
@@ -131,48 +119,7 @@ async fn queue(state: &AppState, set: &ResultSet, runs: &[MoreSeeds]) -> Result<
         runs.len(),
         described.join("; ")
     );
-    let mut tx = state.pool.begin().await?;
-    // Another instance may have planned the same board version.
-    let pending: i64 =
-        sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE more_seeds_of = $1 AND state IN ('queued', 'running')")
-            .bind(&set.id)
-            .fetch_one(&mut *tx)
-            .await?;
-    if pending > 0 {
-        return Ok(());
-    }
-    crate::pipelines::insert_pipeline(
-        &mut tx,
-        &pipeline_id,
-        (project_id, user_id),
-        (&set.commit_sha, "seeds"),
-        "{}",
-        "seeds",
-    )
-    .await?;
-    let job = crate::jobs::NewJob {
-        id: &job_id,
-        pipeline_id: &pipeline_id,
-        project_id,
-        user_id,
-        kind: crate::jobs::JobKind::Seeds,
-        state: crate::jobs::JobState::Queued,
-        failure_reason: None,
-        message: &message,
-        max_attempts: state.config.max_attempts as i64,
-        season: set.season,
-        publish_on_success: false,
-        counts_for_quota: false,
-        finished_at: None,
-        reference_key: None,
-        more_seeds: Some((&set.id, runs)),
-    };
-    crate::jobs::insert(&mut tx, &job).await?;
-    tx.commit().await?;
-    crate::jobs::append_log(&state.pool, &job_id, 0, &format!("[fbksd] queued: {message}\n"), i64::MAX).await?;
-    tracing::info!("{message}");
-    state.job_queued.notify_waiters();
-    Ok(())
+    crate::planner::queue_for_set(state, set, crate::planner::ForSet::Seeds(runs), &message).await
 }
 
 /// Whether `upload` is what seeds job `job` asked for: exactly its runs
