@@ -42,21 +42,18 @@ pub struct Tried {
 }
 
 /// The sets of `sets` (a season's published ones, whose times come from
-/// `class`) to measure again, with their drift: published, visible, their
-/// project still there, left out of equal time for their calibration, none
-/// of their project's waiting, and fewer than [`MAX_TRIES`] of their
-/// commit's tried.
-pub fn plan<'a>(sets: &'a [ResultSet], class: Option<&str>, tried: &Tried) -> Vec<(&'a ResultSet, Drift)> {
+/// `class`) to measure again, with their drift and the try it would be:
+/// published, visible, their project still there, left out of equal time
+/// for their calibration, none of their project's waiting, and fewer than
+/// [`MAX_TRIES`] of their commit's tried.
+pub fn plan<'a>(sets: &'a [ResultSet], class: Option<&str>, tried: &Tried) -> Vec<(&'a ResultSet, Drift, usize)> {
     let untimed = crate::leaderboard::untimed_sets(sets, class);
     sets.iter()
-        .filter_map(|set| match untimed.get(set.id.as_str()) {
-            Some(Untimed::Drifted(drift)) => Some((set, *drift)),
-            _ => None,
-        })
-        .filter(|(set, _)| {
-            let Some(project) = set.project_id.as_deref().filter(|_| set.is_public()) else { return false };
+        .filter_map(|set| {
+            let Some(Untimed::Drifted(drift)) = untimed.get(set.id.as_str()) else { return None };
+            let project = set.project_id.as_deref().filter(|_| set.is_public())?;
             let tries = tried.tries.get(&(project.to_string(), set.commit_sha.clone())).copied().unwrap_or(0);
-            !tried.pending.contains(project) && tries < MAX_TRIES
+            (!tried.pending.contains(project) && tries < MAX_TRIES).then_some((set, *drift, tries + 1))
         })
         .collect()
 }
@@ -83,9 +80,8 @@ pub async fn queue_for(
         }
         *tried.tries.entry((project, commit)).or_default() += 1;
     }
-    for (set, drift) in plan(sets, class, &tried) {
-        let tries = tried.tries.get(&(set.project_id.clone().unwrap_or_default(), set.commit_sha.clone()));
-        queue(state, set, drift, tries.copied().unwrap_or(0) + 1).await?;
+    for (set, drift, try_number) in plan(sets, class, &tried) {
+        queue(state, set, drift, try_number).await?;
     }
     Ok(())
 }
@@ -138,12 +134,12 @@ mod tests {
             measured("d", "delta", "Other CPU", 80.0),
         ];
         let planned = |tried: &Tried| -> Vec<String> {
-            plan(&sets, Some(CLASS), tried).into_iter().map(|(s, _)| s.id.clone()).collect()
+            plan(&sets, Some(CLASS), tried).into_iter().map(|(s, _, _)| s.id.clone()).collect()
         };
         // Only the drifted set of the season's class: another class's is
         // left out for its class, which measuring it again would not change.
         assert_eq!(planned(&Tried::default()), ["c"]);
-        let (drifted, drift) = plan(&sets, Some(CLASS), &Tried::default())[0];
+        let (drifted, drift, _) = plan(&sets, Some(CLASS), &Tried::default())[0];
         assert_eq!((drifted.id.as_str(), drift.cpu_ms, drift.class_ms), ("c", 46.0, 40.4));
 
         let key = ("project-gamma".to_string(), "commit-gamma".to_string());

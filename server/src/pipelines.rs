@@ -592,13 +592,12 @@ async fn end_job(
     let owner = crate::accounts::user_by_id(&state.pool, &job.user_id).await?;
     match (outcome.state, outcome.reason) {
         (JobState::Succeeded, _) if job.kind == JobKind::Benchmark => {
-            let result_id = store_results(state, &job).await?;
+            let (result_id, published) = store_results(state, &job).await?;
             let url = format!("{}/results/{result_id}", state.public_url);
             crate::jobs::append_log(&state.pool, job_id, attempt, &format!("[fbksd] private results: {url}\n"), i64::MAX)
                 .await?;
             if let Some(old) = &job.measures_again {
                 // The service asked for it, not the owner: no mail.
-                let published = crate::results::get(&state.pool, &result_id).await?.is_some_and(|s| s.is_public());
                 let note = if published {
                     format!("[fbksd] published in the place of result set {old}\n")
                 } else {
@@ -663,7 +662,7 @@ async fn end_job(
 /// runner reports the end again: the set's id is chosen once and kept on
 /// the job; the files move under it (a retry finds them there); the shared
 /// references are kept; then the set and the job's end commit together.
-async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<String, ServiceError> {
+async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<(String, bool), ServiceError> {
     let (staged, mut publish) = crate::jobs::staged_results(&state.pool, &job.id).await?;
     let staged = staged.ok_or_else(|| {
         ServiceError::conflict("no_results", "upload the results (PUT …/results) before reporting success")
@@ -720,7 +719,7 @@ async fn store_results(state: &AppState, job: &crate::jobs::Job) -> Result<Strin
     }
     tx.commit().await?;
     crash_point("committed");
-    Ok(id)
+    Ok((id, publish))
 }
 
 /// Ends the process at once when `FBKSD_CRASH_AT` names `step`: the
